@@ -1,0 +1,12 @@
+// The flankcam subcommands. Each registers its options on the CLI11 app and
+// returns the function that runs it; main() only dispatches and reports errors.
+#pragma once
+#include <CLI/CLI.hpp>
+#include <functional>
+
+namespace flankcam::cli {
+
+using Run = std::function<int()>;
+Run add_envelope_command(CLI::App& app);
+
+}  // namespace flankcam::cli

@@ -1,0 +1,14 @@
+// Typed exceptions for bad input. The CLI turns each into one line and a
+// non-zero exit; expected numerical outcomes are results, never thrown.
+#pragma once
+#include <stdexcept>
+#include <string>
+
+namespace flankcam {
+
+// Bad user input: a file, a key, a value. The message names what is wrong.
+struct InputError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+}  // namespace flankcam

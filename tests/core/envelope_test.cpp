@@ -1,0 +1,97 @@
+#include "core/envelope.h"
+
+#include <doctest/doctest.h>
+
+#include "core/closest_point.h"
+
+using namespace flankcam;
+
+namespace {
+std::vector<std::pair<std::string, RadiusProfile>> profiles() {
+  return {{"cylinder", cylinder_profile(6)},
+          {"cone", cone_profile(6, 9)},
+          {"barrel", barrel_profile(6, 1.5)},
+          {"spline", spline_profile({5.0, 6.5, 7.5, 6.5, 7.0, 8.5})}};
+}
+}  // namespace
+
+TEST_CASE("analytic motions are rigid and start at the origin of their path") {
+  for (const char* kind : {"twist", "arc", "helix", "s-curve"}) {
+    CAPTURE(kind);
+    AnalyticMotionOptions o;
+    o.kind = kind;
+    const LineMotion m = analytic_motion(o);
+    for (double t = 0; t <= 1.0; t += 0.05) {
+      CHECK((m.b(t) - m.a(t)).norm() == doctest::Approx(o.length).epsilon(1e-12));
+      // The velocities keep the length: <da - db, a - b> = 0 (projection rule, eq. 1).
+      CHECK(std::abs((m.da(t) - m.db(t)).dot(m.a(t) - m.b(t))) < 1e-6);
+    }
+  }
+}
+
+TEST_CASE("an envelope point satisfies the two envelope conditions and the sphere equation") {
+  const Eigen::Vector3d c(1, 2, 3), c_s(0.3, -0.2, 39.9), c_t(100, 5, -7);
+  for (int sheet : {1, -1}) {
+    const EnvelopePoint p = envelope_point(c, c_s, c_t, 6.5, -3.0, sheet);
+    REQUIRE(p.valid);
+    CHECK(p.normal.norm() == doctest::Approx(1.0));
+    CHECK(p.normal.dot(c_s) == doctest::Approx(3.0));  // = -d'(s)
+    CHECK(std::abs(p.normal.dot(c_t)) < 1e-12);
+    CHECK((p.point - c).norm() == doctest::Approx(6.5));
+  }
+  CHECK_FALSE(envelope_point(c, c_s, c_t, 6.5, -45.0, 1).valid);  // steeper than the axis: no characteristic
+}
+
+TEST_CASE("every profile under every motion: axis samples lie at distance d(s) from the envelope mesh") {
+  for (const char* kind : {"twist", "arc", "helix", "s-curve"})
+    for (const auto& [name, profile] : profiles()) {
+      CAPTURE(kind);
+      CAPTURE(name);
+      AnalyticMotionOptions o;
+      o.kind = kind;
+      const LineMotion m = analytic_motion(o);
+      const int ns = 41, nt = 161;
+      const EnvelopeGrid g = envelope_grid(m, profile, ns, nt, 1);
+      CHECK(g.invalid_points == 0);
+      CHECK(g.folded_triangles == 0);
+      CHECK(g.mesh.faces.size() == size_t(2 * (ns - 1) * (nt - 1)));
+      const SurfaceIndex index(g.mesh);
+      // Chordal (tessellation) error of a grid with ~1 mm cells on radii >= 5 mm.
+      const double tessellation = 0.03;
+      double worst = 0;
+      for (int i = 8; i < nt - 8; i += 8)  // away from the ends, where the sheet stops
+        for (int j = 0; j < ns; j += 4) {
+          const double t = double(i) / (nt - 1), s = double(j) / (ns - 1);
+          const Eigen::Vector3d c = (1 - s) * m.a(t) + s * m.b(t);
+          worst = std::max(worst, std::abs(index.closest(c).distance - profile.d(s)));
+        }
+      CHECK(worst < tessellation);
+    }
+}
+
+TEST_CASE("the envelope faces are oriented away from the tool axis") {
+  AnalyticMotionOptions o;
+  const LineMotion m = analytic_motion(o);
+  const EnvelopeGrid g = envelope_grid(m, cylinder_profile(6), 10, 30, 1);
+  const SurfaceIndex index(g.mesh);
+  const Eigen::Vector3d c = 0.5 * (m.a(0.5) + m.b(0.5));
+  const Footpoint f = index.closest(c);
+  CHECK(f.normal.dot(c - f.point) > 0.99 * f.distance);  // normal points back to the axis
+}
+
+TEST_CASE("B-spline rails give the same envelope as the positions they interpolate") {
+  AnalyticMotionOptions o;
+  o.kind = "arc";
+  const LineMotion m = analytic_motion(o);
+  Eigen::MatrixXd A(200, 3), B(200, 3);
+  std::vector<double> ts;
+  for (int i = 0; i < 200; ++i) {
+    ts.push_back(i / 199.0);
+    A.row(i) = m.a(ts.back()).transpose();
+    B.row(i) = m.b(ts.back()).transpose();
+  }
+  const LineMotion r = motion_from_rails(fit_bspline(A, ts, 40), fit_bspline(B, ts, 40));
+  const RadiusProfile p = cone_profile(5, 8);
+  const EnvelopeGrid ga = envelope_grid(m, p, 5, 20, 1), gb = envelope_grid(r, p, 5, 20, 1);
+  for (size_t k = 0; k < ga.mesh.vertices.size(); ++k) CHECK((ga.mesh.vertices[k] - gb.mesh.vertices[k]).norm() < 1e-3);
+}

@@ -1,0 +1,52 @@
+// Helpers shared by the test suites: scratch directories and small meshes.
+#pragma once
+#include <Eigen/Core>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <unistd.h>
+
+#include "core/mesh.h"
+
+namespace flankcam::test {
+
+// A fresh directory under the system temp dir, removed when the object dies.
+struct ScratchDir {
+  std::filesystem::path path;
+  explicit ScratchDir(const std::string& tag) {
+    static int counter = 0;
+    path = std::filesystem::temp_directory_path() /
+           ("flankcam-test-" + tag + "-" + std::to_string(::getpid()) + "-" + std::to_string(counter++));
+    std::filesystem::remove_all(path);
+    std::filesystem::create_directories(path);
+  }
+  ~ScratchDir() {
+    std::error_code ec;
+    std::filesystem::remove_all(path, ec);
+  }
+  [[nodiscard]] std::string file(const std::string& name) const { return (path / name).string(); }
+};
+
+inline void write_text(const std::string& path, const std::string& text) {
+  std::ofstream(path, std::ios::binary) << text;
+}
+
+// A wavy height field z = f(x, y) on an nx x ny grid over [0, sx] x [0, sy] (mm).
+inline TriMesh wavy_grid(int nx, int ny, double sx, double sy, double amplitude) {
+  TriMesh m;
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i < nx; ++i) {
+      const double x = sx * i / (nx - 1), y = sy * j / (ny - 1);
+      m.vertices.emplace_back(x, y, amplitude * std::sin(0.11 * x) * std::cos(0.07 * y + 0.3 * std::sin(0.05 * x)));
+    }
+  for (int j = 0; j + 1 < ny; ++j)
+    for (int i = 0; i + 1 < nx; ++i) {
+      const int v = j * nx + i;
+      m.faces.push_back({v, v + 1, v + nx + 1});
+      m.faces.push_back({v, v + nx + 1, v + nx});
+    }
+  return m;
+}
+
+}  // namespace flankcam::test
