@@ -144,9 +144,10 @@ LineMotion analytic_motion(const AnalyticMotionOptions& o) {
   const Eigen::Vector3d X = Eigen::Vector3d::UnitX(), Z = Eigen::Vector3d::UnitZ();
   std::function<Eigen::Vector3d(double)> a, e;
   if (o.kind == "twist") {
-    // Straight translation along X while the axis turns about X (a helicoidal, twisted flank).
+    // Straight translation along X while the axis turns about X at a varying rate (a twisted
+    // flank; a constant rate would be a screw motion, whose envelope admits a family of tools).
     a = [T](double t) { return Eigen::Vector3d(T * t, 0, 0); };
-    e = [twist, X, Z](double t) { return rotate(Z, X, twist * (t - 0.5)); };
+    e = [twist, X, Z](double t) { return rotate(Z, X, twist * (t * t * (3 - 2 * t) - 0.5)); };
   } else if (o.kind == "arc") {
     // Circular path of radius T in the XY plane, axis leaning outwards by 10 degrees + twist.
     const double sweep = 60 * kPi / 180, lean = 10 * kPi / 180;

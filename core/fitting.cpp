@@ -1,0 +1,524 @@
+#include "core/fitting.h"
+
+#include <ceres/ceres.h>
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <optional>
+
+#include "core/errors.h"
+
+namespace flankcam {
+
+const char* to_string(ToolShape s) {
+  switch (s) {
+    case ToolShape::General: return "general";
+    case ToolShape::Cone: return "cone";
+    case ToolShape::Cylinder: return "cylinder";
+  }
+  return "?";
+}
+
+ToolShape tool_shape_from_string(const std::string& s) {
+  if (s == "general") return ToolShape::General;
+  if (s == "cone") return ToolShape::Cone;
+  if (s == "cylinder") return ToolShape::Cylinder;
+  throw InputError("tool shape '" + s + "' is not one of general, cone, cylinder");
+}
+
+std::string FitOptions::validate() const {
+  if (samples_s < 4) return "sampling.s: at least 4 samples along the axis";
+  if (samples_t < 8) return "sampling.t: at least 8 samples along the motion";
+  for (double w : {w_plane, w_fair, w_point, w_rigid})
+    if (!(w >= 0) || !std::isfinite(w)) return "weights: must be finite and >= 0";
+  if (!(w_plane > 0 || w_point > 0)) return "weights: plane or point must be positive";
+  if (!(w_anchor >= 0) || !std::isfinite(w_anchor)) return "weights.anchor: must be finite and >= 0";
+  if (rail_control_points < 4) return "rail_control_points: at least 4";
+  if (rail_control_points * 2 > samples_t) return "rail_control_points: at most half of sampling.t";
+  if (meridian_control_points < 4 || meridian_control_points > samples_s) return "meridian_control_points: 4 .. sampling.s";
+  if (max_iterations < 1) return "max_iterations: at least 1";
+  if (solver_iterations < 1) return "solver_iterations: at least 1";
+  if (!(stall >= 0)) return "stall: must be >= 0";
+  if (threads < 1) return "threads: at least 1";
+  return {};
+}
+
+LineMotion to_motion(const Rails& r) { return motion_from_rails(r.a, r.b); }
+
+namespace {
+
+constexpr double kMaxOverhang = 0.05;  // tangential overhang over distance for boundary samples (~3 degrees)
+
+BSpline fit_rail(const std::vector<Eigen::Vector3d>& pts, const std::vector<double>& ts, int n_ctrl) {
+  Eigen::MatrixXd P(Eigen::Index(pts.size()), 3);
+  for (size_t i = 0; i < pts.size(); ++i) P.row(Eigen::Index(i)) = pts[i].transpose();
+  return fit_bspline(P, ts, n_ctrl, 0.0);
+}
+
+// Cubic B-spline through the ordered points (chord-length parameters, one control point per
+// point, so it interpolates them); fewer than 4 points are first densified along the polygon.
+BSpline spline_through(std::vector<Eigen::Vector3d> poly, const std::vector<double>& ts_in) {
+  std::vector<double> ts = ts_in;
+  if (poly.size() < 4) {
+    std::vector<Eigen::Vector3d> out;
+    std::vector<double> out_t;
+    for (int k = 0; k < 4; ++k) {
+      const double u = double(k) / 3 * double(poly.size() - 1);
+      const size_t i = std::min(size_t(u), poly.size() - 2);
+      out.push_back(poly[i] + (u - double(i)) * (poly[i + 1] - poly[i]));
+      out_t.push_back(ts[i] + (u - double(i)) * (ts[i + 1] - ts[i]));
+    }
+    poly = out;
+    ts = out_t;
+  }
+  return fit_rail(poly, ts, int(poly.size()));
+}
+
+// r = sum_b J_b x_b - c: the plane, point and fairness residuals are linear in the
+// unknowns once footpoints and normals are fixed (they are recomputed between solves).
+class LinearResidual final : public ceres::CostFunction {
+ public:
+  LinearResidual(std::vector<Eigen::MatrixXd> J, Eigen::VectorXd c) : J_(std::move(J)), c_(std::move(c)) {
+    set_num_residuals(int(c_.size()));
+    for (const auto& j : J_) mutable_parameter_block_sizes()->push_back(int(j.cols()));
+  }
+  bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
+    const Eigen::Index n = c_.size();
+    Eigen::Map<Eigen::VectorXd> r(residuals, n);
+    r = -c_;
+    for (size_t b = 0; b < J_.size(); ++b) {
+      r += J_[b] * Eigen::Map<const Eigen::VectorXd>(x[b], J_[b].cols());
+      if (jacobians && jacobians[b])
+        Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(jacobians[b], n,
+                                                                                            J_[b].cols()) = J_[b];
+    }
+    return true;
+  }
+
+ private:
+  std::vector<Eigen::MatrixXd> J_;
+  Eigen::VectorXd c_;
+};
+
+// One sample p_ij = (1-s) a(t_i) + s b(t_i) with its fixed footpoint q and unit normal n:
+//   F_plane, eq. (10): w_plane (<p - q, n> - d_j)            (1 residual)
+//   F_point, eq. (10): w_point (p - (q + d_j n))              (3 residuals)
+// with a(t_i) = sum_k w_k A_k, b(t_i) = sum_k w_k B_k and d_j = sum_k c_k D_k.
+class SampleResidual final : public ceres::CostFunction {
+ public:
+  SampleResidual(const BasisRow& row, double s, const Eigen::Vector3d& q, const Eigen::Vector3d& n,
+                 const std::vector<double>& c, double w_plane, double w_point)
+      : row_(row), s_(s), q_(q), n_(n), c_(c), w_plane_(w_plane), w_point_(w_point) {
+    set_num_residuals(4);
+    for (int k = 0; k < 8; ++k) mutable_parameter_block_sizes()->push_back(3);
+    mutable_parameter_block_sizes()->push_back(int(c_.size()));
+  }
+  bool Evaluate(double const* const* x, double* r, double** J) const override {
+    Eigen::Vector3d p = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k)
+      p += row_.w[k] * ((1 - s_) * Eigen::Map<const Eigen::Vector3d>(x[k]) + s_ * Eigen::Map<const Eigen::Vector3d>(x[4 + k]));
+    double d = 0;
+    for (size_t k = 0; k < c_.size(); ++k) d += c_[k] * x[8][k];
+    r[0] = w_plane_ * ((p - q_).dot(n_) - d);
+    Eigen::Map<Eigen::Vector3d>{r + 1} = w_point_ * (p - q_ - d * n_);
+    if (!J) return true;
+    for (int k = 0; k < 8; ++k) {
+      if (!J[k]) continue;
+      const double f = row_.w[k % 4] * (k < 4 ? 1 - s_ : s_);
+      Eigen::Map<Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> Jk(J[k]);
+      Jk.row(0) = w_plane_ * f * n_.transpose();
+      Jk.bottomRows<3>() = w_point_ * f * Eigen::Matrix3d::Identity();
+    }
+    if (J[8]) {
+      const int K = int(c_.size());
+      Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> Jd(J[8], 4, K);
+      for (int k = 0; k < K; ++k) {
+        Jd(0, k) = -w_plane_ * c_[size_t(k)];
+        Jd.block<3, 1>(1, k) = -w_point_ * c_[size_t(k)] * n_;
+      }
+    }
+    return true;
+  }
+
+ private:
+  BasisRow row_;
+  double s_;
+  Eigen::Vector3d q_, n_;
+  std::vector<double> c_;
+  double w_plane_, w_point_;
+};
+
+// Rigidity, eq. (9) as a soft constraint: r = w (|a(t_i) - b(t_i)|^2 - L^2),
+// a(t_i) = sum_k w_k A_k, b(t_i) = sum_k w_k B_k over the four active control points.
+class RigidResidual final : public ceres::SizedCostFunction<1, 3, 3, 3, 3, 3, 3, 3, 3> {
+ public:
+  RigidResidual(const BasisRow& row, double L, double weight) : row_(row), L2_(L * L), w_(weight) {}
+  bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
+    Eigen::Vector3d u = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k)
+      u += row_.w[k] * (Eigen::Map<const Eigen::Vector3d>(x[k]) - Eigen::Map<const Eigen::Vector3d>(x[4 + k]));
+    residuals[0] = w_ * (u.squaredNorm() - L2_);
+    if (jacobians)
+      for (int k = 0; k < 4; ++k) {
+        if (jacobians[k]) Eigen::Map<Eigen::RowVector3d>{jacobians[k]} = 2 * w_ * row_.w[k] * u.transpose();
+        if (jacobians[4 + k]) Eigen::Map<Eigen::RowVector3d>{jacobians[4 + k]} = -2 * w_ * row_.w[k] * u.transpose();
+      }
+    return true;
+  }
+
+ private:
+  BasisRow row_;
+  double L2_, w_;
+};
+
+std::vector<double> sample_params(int count) { return uniform_parameters(count); }
+
+// Footpoints of the m x n samples R(t_i, s_j), row-major in i.
+std::vector<Footpoint> sample_footpoints(const SurfaceIndex& surface, const Rails& rails, int m, int n) {
+  std::vector<Eigen::Vector3d> pts(size_t(m) * n);
+  for (int i = 0; i < m; ++i) {
+    const double t = double(i) / (m - 1);
+    const Eigen::Vector3d a = rails.a.point(t), b = rails.b.point(t);
+    for (int j = 0; j < n; ++j) {
+      const double s = double(j) / (n - 1);
+      pts[size_t(i) * n + j] = (1 - s) * a + s * b;
+    }
+  }
+  return surface.closest(pts);
+}
+
+// The unit normal n_ij of a sample's footpoint plane, oriented towards p, or nothing when
+// the sample has no data. Inside Φ it is (p - p⊥)/|p - p⊥|, the gradient of the distance (the
+// interpolated vertex normal would tilt it by up to half the angle between faces and bias the
+// fit). At a boundary footpoint the sample may hang over the edge: it keeps the surface's
+// tangent plane there (a first-order continuation of Φ) while the overhang is small, else it
+// is left out. Dropping every boundary sample instead would let the optimiser lower its
+// objective by pushing samples over the edge.
+std::optional<Eigen::Vector3d> sample_plane(const Eigen::Vector3d& p, const Footpoint& f) {
+  const Eigen::Vector3d r = p - f.point;
+  const double dist = r.norm();
+  if (!f.on_boundary) return dist > 1e-12 ? Eigen::Vector3d(r / dist) : f.normal;
+  const Eigen::Vector3d n = r.dot(f.normal) >= 0 ? f.normal : Eigen::Vector3d(-f.normal);
+  const double along = r.dot(n);
+  if (!(along > 0) || (r - along * n).norm() > kMaxOverhang * along) return std::nullopt;
+  return n;
+}
+
+int shape_parameters(ToolShape shape, const FitOptions& o) {
+  switch (shape) {
+    case ToolShape::General: return o.meridian_control_points;
+    case ToolShape::Cone: return 2;
+    case ToolShape::Cylinder: return 1;
+  }
+  return 1;
+}
+
+}  // namespace
+
+Rails rails_from_lines(const std::vector<AxisLine>& lines, int rail, double length, const FitOptions& o) {
+  if (lines.size() < 2) throw InputError("lines: surface-driven initialisation needs at least 2 lines");
+  std::vector<Eigen::Vector3d> pa, pb;
+  double mean_length = 0;
+  for (const auto& l : lines) {
+    pa.push_back(l.a);
+    pb.push_back(l.b);
+    mean_length += (l.b - l.a).norm() / double(lines.size());
+  }
+  if (!(mean_length > 0)) throw InputError("lines: the axis lines have zero length");
+  const double L = length > 0 ? length : mean_length;
+  // The paper uses the endpoints as control polygons; users give positions the axis should take,
+  // so the rails interpolate them (chord-length parameters of the midpoints).
+  Eigen::MatrixXd mids(Eigen::Index(lines.size()), 3);
+  for (size_t k = 0; k < lines.size(); ++k) mids.row(Eigen::Index(k)) = (0.5 * (pa[k] + pb[k])).transpose();
+  const std::vector<double> tl = chord_length_parameters(mids);
+  const BSpline sa = spline_through(pa, tl), sb = spline_through(pb, tl);
+  const int samples = std::max(4 * o.samples_t, 200);
+  std::vector<Eigen::Vector3d> A, B;
+  const std::vector<double> ts = sample_params(samples);
+  for (double t : ts) {
+    const Eigen::Vector3d a = sa.point(t), b = sb.point(t);
+    const Eigen::Vector3d dir = (b - a).normalized();
+    if (rail == 0) {
+      A.push_back(a);
+      B.push_back(a + L * dir);
+    } else {
+      A.push_back(b - L * dir);
+      B.push_back(b);
+    }
+  }
+  return {fit_rail(A, ts, o.rail_control_points), fit_rail(B, ts, o.rail_control_points), L};
+}
+
+Rails rails_from_trajectory(const LineTrajectory& tr, const FitOptions& o) {
+  if (tr.a.size() < size_t(o.rail_control_points))
+    throw InputError("line propagation produced only " + std::to_string(tr.a.size()) +
+                     " positions: the line is not movable along the surface (try another line)");
+  Eigen::MatrixXd mids(Eigen::Index(tr.a.size()), 3);
+  for (size_t k = 0; k < tr.a.size(); ++k) mids.row(Eigen::Index(k)) = (0.5 * (tr.a[k] + tr.b[k])).transpose();
+  const std::vector<double> ts = chord_length_parameters(mids);
+  return {fit_rail(tr.a, ts, o.rail_control_points), fit_rail(tr.b, ts, o.rail_control_points),
+          (tr.b[0] - tr.a[0]).norm()};
+}
+
+std::vector<double> ToolRadius::basis(double s) const {
+  const int K = int(D.size());
+  std::vector<double> c(size_t(K), 0.0);
+  if (shape == ToolShape::General) {
+    const BasisRow r = bspline_basis(K, s);
+    for (int k = 0; k < 4; ++k) c[size_t(r.first + k)] = r.w[k];
+  } else if (shape == ToolShape::Cone) {
+    c = {1 - s, s};
+  } else {
+    c = {1.0};
+  }
+  return c;
+}
+
+double ToolRadius::d(double s) const {
+  const std::vector<double> c = basis(s);
+  return std::inner_product(c.begin(), c.end(), D.begin(), 0.0);
+}
+
+RadiusProfile ToolRadius::profile() const {
+  if (shape == ToolShape::General) return spline_profile(D);
+  if (shape == ToolShape::Cone) return cone_profile(D[0], D[1]);
+  return cylinder_profile(D[0]);
+}
+
+ToolRadius initial_tool(const SurfaceIndex& surface, const Rails& rails, const FitOptions& o) {
+  const int m = o.samples_t, n = o.samples_s;
+  const auto fps = sample_footpoints(surface, rails, m, n);
+  // Footpoints in the common (axial, radial) plane of the moving axis.
+  std::vector<Eigen::Vector2d> zr;
+  for (int i = 0; i < m; ++i) {
+    const double t = double(i) / (m - 1);
+    const Eigen::Vector3d a = rails.a.point(t), b = rails.b.point(t);
+    const double len = (b - a).norm();
+    const Eigen::Vector3d e = (b - a) / len;
+    for (int j = 0; j < n; ++j) {
+      const Footpoint& f = fps[size_t(i) * n + j];
+      if (f.on_boundary) continue;  // meridian from interior footpoints only
+      const Eigen::Vector3d q = f.point - a;
+      const double z = q.dot(e) * rails.length / len;
+      zr.emplace_back(z, (q - q.dot(e) * e).norm());
+    }
+  }
+  if (zr.size() < size_t(2 * n))
+    throw InputError("the initial motion is not over the design surface: almost all footpoints lie on its boundary");
+  ToolRadius tool;
+  tool.shape = o.shape;
+  const int K = shape_parameters(o.shape, o);
+  std::vector<double> d(static_cast<size_t>(n));
+  const double L = rails.length;
+  if (o.shape == ToolShape::General) {
+    // Least-squares cubic meridian r(z) with K control points over the footpoints' z range.
+    double zmin = INFINITY, zmax = -INFINITY;
+    for (const auto& p : zr) zmin = std::min(zmin, p.x()), zmax = std::max(zmax, p.x());
+    if (!(zmax > zmin)) zmax = zmin + L;
+    std::vector<Eigen::Vector2d> sorted_zr = zr;
+    std::sort(sorted_zr.begin(), sorted_zr.end(), [](const auto& p, const auto& q) { return p.x() < q.x(); });
+    Eigen::MatrixXd R(Eigen::Index(sorted_zr.size()), 1);
+    std::vector<double> us;
+    for (size_t k = 0; k < sorted_zr.size(); ++k) {
+      us.push_back((sorted_zr[k].x() - zmin) / (zmax - zmin));
+      R(Eigen::Index(k), 0) = sorted_zr[k].y();
+    }
+    const BSpline meridian_spline = fit_bspline(R, us, K, 1e-6);
+    std::vector<Eigen::Vector2d> curve;
+    for (int k = 0; k <= 800; ++k) {
+      const double u = k / 800.0;
+      curve.emplace_back(zmin + u * (zmax - zmin), meridian_spline.value(u));
+    }
+    for (int j = 0; j < n; ++j) {
+      const Eigen::Vector2d c(L * j / (n - 1), 0.0);
+      double best = INFINITY;
+      for (const auto& p : curve) best = std::min(best, (p - c).norm());
+      d[size_t(j)] = best;
+    }
+  } else {
+    // Line (cone) or constant (cylinder) meridian r = α + β z by least squares.
+    Eigen::MatrixXd M(Eigen::Index(zr.size()), o.shape == ToolShape::Cone ? 2 : 1);
+    Eigen::VectorXd r(Eigen::Index(zr.size()));
+    for (size_t k = 0; k < zr.size(); ++k) {
+      M(Eigen::Index(k), 0) = 1;
+      if (o.shape == ToolShape::Cone) M(Eigen::Index(k), 1) = zr[k].x();
+      r[Eigen::Index(k)] = zr[k].y();
+    }
+    const Eigen::VectorXd coef = M.colPivHouseholderQr().solve(r);
+    const double beta = o.shape == ToolShape::Cone ? coef[1] : 0.0;
+    for (int j = 0; j < n; ++j) d[size_t(j)] = (coef[0] + beta * L * j / (n - 1)) / std::sqrt(1 + beta * beta);
+  }
+  // Parameters D of the shape's basis from the d_j, least squares.
+  tool.D.assign(size_t(K), 0.0);
+  Eigen::MatrixXd C(n, K);
+  Eigen::VectorXd dj(n);
+  for (int j = 0; j < n; ++j) {
+    const std::vector<double> c = tool.basis(double(j) / (n - 1));
+    for (int k = 0; k < K; ++k) C(j, k) = c[size_t(k)];
+    dj[j] = d[size_t(j)];
+  }
+  const Eigen::VectorXd D = C.colPivHouseholderQr().solve(dj);
+  for (int k = 0; k < K; ++k) tool.D[size_t(k)] = D[k];
+  return tool;
+}
+
+std::vector<Eigen::Vector2d> meridian(const ToolRadius& tool, double length, int points) {
+  const RadiusProfile p = tool.profile();
+  std::vector<Eigen::Vector2d> out;
+  for (int k = 0; k < points; ++k) {
+    const double s = double(k) / (points - 1);
+    const double d = p.d(s), dz = p.d_s(s) / length;  // d'(z)
+    const double z = s * length - d * dz;               // envelope of the circles (z, d(z))
+    out.emplace_back(z, d * std::sqrt(std::max(0.0, 1 - dz * dz)));
+  }
+  return out;
+}
+
+ErrorStats sample_error(const SurfaceIndex& surface, const Rails& rails, const ToolRadius& tool, const FitOptions& o) {
+  const int m = o.samples_t, n = o.samples_s;
+  const auto fps = sample_footpoints(surface, rails, m, n);
+  ErrorStats e;
+  std::vector<double> errs;
+  for (int i = 0; i < m; ++i)
+    for (int j = 0; j < n; ++j) {
+      const Footpoint& f = fps[size_t(i) * n + j];
+      const double s = double(j) / (n - 1);
+      const Eigen::Vector3d p = rails.point(double(i) / (m - 1), s);
+      if (f.on_boundary) {  // the footpoint is on Φ's rim: the sample is beyond Φ, not an error of it
+        ++e.excluded;
+        continue;
+      }
+      errs.push_back(std::abs((p - f.point).norm() - tool.d(s)));
+    }
+  e.samples = int(errs.size());
+  if (errs.empty()) return e;
+  e.max = *std::max_element(errs.begin(), errs.end());
+  e.mean = std::accumulate(errs.begin(), errs.end(), 0.0) / double(errs.size());
+  const int bins = 10;
+  e.histogram.assign(bins, 0);
+  for (int k = 0; k <= bins; ++k) e.bin_edges.push_back(e.max * k / bins);
+  for (double x : errs) ++e.histogram[std::min(bins - 1, e.max > 0 ? int(x / e.max * bins) : 0)];
+  return e;
+}
+
+FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, const FitOptions& o) {
+  if (auto err = o.validate(); !err.empty()) throw InputError(err);
+  const int m = o.samples_t, n = o.samples_s, Nc = o.rail_control_points;
+  FitResult result;
+  result.rails = initial;
+  if (initial.a.size() != Nc || initial.b.size() != Nc)
+    throw InputError("optimize_motion: rails must have rail_control_points control points");
+  result.tool = initial_tool(surface, initial, o);
+  const ToolRadius anchor_tool = result.tool;
+  result.eps_ini = sample_error(surface, initial, result.tool, o);
+  const double L = initial.length;
+
+  std::vector<BasisRow> rows(static_cast<size_t>(m));
+  for (int i = 0; i < m; ++i) rows[size_t(i)] = bspline_basis(Nc, double(i) / (m - 1));
+  std::vector<std::vector<double>> tool_basis(static_cast<size_t>(n));
+  for (int j = 0; j < n; ++j) tool_basis[size_t(j)] = result.tool.basis(double(j) / (n - 1));
+  const int K = int(result.tool.D.size());
+
+  for (int iter = 0; iter < o.max_iterations; ++iter) {
+    // Unknowns: control points of a(t), b(t) and the radius parameters D.
+    std::vector<double> A(size_t(3 * Nc)), B(size_t(3 * Nc));
+    for (int k = 0; k < Nc; ++k)
+      for (int c = 0; c < 3; ++c) {
+        A[size_t(3 * k + c)] = result.rails.a.ctrl(k, c);
+        B[size_t(3 * k + c)] = result.rails.b.ctrl(k, c);
+      }
+    std::vector<double> D = result.tool.D;
+    const auto fps = sample_footpoints(surface, result.rails, m, n);
+
+    ceres::Problem::Options po;
+    ceres::Problem problem(po);
+    const double w_plane = std::sqrt(o.w_plane / (double(m) * n)), w_point = std::sqrt(o.w_point / (double(m) * n));
+    for (int i = 0; i < m; ++i) {
+      const BasisRow& row = rows[size_t(i)];
+      std::vector<double*> blocks;
+      for (int k = 0; k < 4; ++k) blocks.push_back(&A[size_t(3 * (row.first + k))]);
+      for (int k = 0; k < 4; ++k) blocks.push_back(&B[size_t(3 * (row.first + k))]);
+      blocks.push_back(D.data());
+      for (int j = 0; j < n; ++j) {
+        const Footpoint& f = fps[size_t(i) * n + j];
+        const double s = double(j) / (n - 1);
+        const Eigen::Vector3d p = result.rails.point(double(i) / (m - 1), s);
+        const auto plane = sample_plane(p, f);
+        if (!plane) continue;  // the axis point is beyond Φ's boundary: no data there
+        const Eigen::Vector3d nrm = *plane;
+        problem.AddResidualBlock(new SampleResidual(row, s, f.point, nrm, tool_basis[size_t(j)], w_plane, w_point),
+                                 nullptr, blocks);
+      }
+      // F_rigid, eq. (9), soft.
+      if (o.w_rigid > 0)
+        problem.AddResidualBlock(new RigidResidual(row, L, std::sqrt(o.w_rigid / m)), nullptr,
+                                 std::vector<double*>(blocks.begin(), blocks.begin() + 8));
+    }
+    // F_fair, eq. (11): second differences of a(t_i) and b(t_i).
+    if (o.w_fair > 0) {
+      const double w = std::sqrt(o.w_fair / m);
+      for (int i = 1; i + 1 < m; ++i) {
+        Eigen::RowVectorXd coef = Eigen::RowVectorXd::Zero(Nc);
+        for (int di = -1; di <= 1; ++di) {
+          const BasisRow& r = rows[size_t(i + di)];
+          for (int k = 0; k < 4; ++k) coef[r.first + k] += (di == 0 ? -2.0 : 1.0) * r.w[k];
+        }
+        for (std::vector<double>* X : {&A, &B}) {
+          std::vector<Eigen::MatrixXd> J;
+          std::vector<double*> blocks;
+          Eigen::Vector3d start = Eigen::Vector3d::Zero();  // second difference at the start of this round
+          for (int k = 0; k < Nc; ++k)
+            if (coef[k] != 0) {
+              J.push_back(w * coef[k] * Eigen::Matrix3d::Identity());
+              blocks.push_back(&(*X)[size_t(3 * k)]);
+              start += w * coef[k] * Eigen::Map<const Eigen::Vector3d>(&(*X)[size_t(3 * k)]);
+            }
+          const Eigen::Vector3d rhs = o.fair_update ? start : Eigen::Vector3d::Zero();
+          problem.AddResidualBlock(new LinearResidual(std::move(J), rhs), nullptr, blocks);
+        }
+      }
+    }
+    // Anchor of the tool radii (not in the paper): on nearly developable surfaces a shift of the axis
+    // along the surface normal with an equal change of every d_j leaves the envelope almost unchanged,
+    // so the radii are barely determined by Φ. A weak pull to the initial meridian fixes that mode.
+    if (o.w_anchor > 0) {
+      const double w = std::sqrt(o.w_anchor / n);
+      Eigen::MatrixXd C(n, K);
+      Eigen::VectorXd target(n);
+      for (int j = 0; j < n; ++j) {
+        for (int k = 0; k < K; ++k) C(j, k) = w * tool_basis[size_t(j)][size_t(k)];
+        target[j] = w * anchor_tool.d(double(j) / (n - 1));
+      }
+      problem.AddResidualBlock(new LinearResidual({C}, target), nullptr, D.data());
+    }
+    ceres::Solver::Options so;
+    so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+    so.max_num_iterations = o.solver_iterations;
+    so.num_threads = o.threads;
+    so.logging_type = ceres::SILENT;
+    ceres::Solver::Summary summary;
+    ceres::Solve(so, &problem, &summary);
+
+    for (int k = 0; k < Nc; ++k)
+      for (int c = 0; c < 3; ++c) {
+        result.rails.a.ctrl(k, c) = A[size_t(3 * k + c)];
+        result.rails.b.ctrl(k, c) = B[size_t(3 * k + c)];
+      }
+    result.tool.D = D;
+    const double objective = 2 * summary.final_cost;  // F_motion, eq. (12)
+    result.objective.push_back(objective);
+    result.iterations = iter + 1;
+    // The footpoints (and which samples lie beyond Φ) change between solves, so progress is
+    // judged within a solve: converged when one round cannot lower its own objective.
+    if (objective <= 0 || summary.initial_cost - summary.final_cost < o.stall * summary.initial_cost) {
+      result.converged = true;
+      break;
+    }
+  }
+  result.eps_opt = sample_error(surface, result.rails, result.tool, o);
+  return result;
+}
+
+}  // namespace flankcam

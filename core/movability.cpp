@@ -1,0 +1,251 @@
+#include "core/movability.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+namespace flankcam {
+
+namespace {
+
+constexpr double kSlidePrice = 1e-3;  // relative to trace(A)
+
+// Orthonormal n1, n2 spanning the plane normal to the unit vector e (deterministic choice).
+std::pair<Eigen::Vector3d, Eigen::Vector3d> normal_plane(const Eigen::Vector3d& e) {
+  Eigen::Index k;
+  e.cwiseAbs().minCoeff(&k);
+  const Eigen::Vector3d n1 = e.cross(Eigen::Vector3d::Unit(k)).normalized();
+  return {n1, e.cross(n1)};
+}
+
+}  // namespace
+
+std::string MovabilityOptions::validate() const {
+  if (samples < 5) return "samples: at least 5 points on a line";
+  if (!(jump_ratio > 1)) return "jump_ratio: must be greater than 1";
+  return {};
+}
+
+std::string ExplorationOptions::validate() const {
+  if (auto e = movability.validate(); !e.empty()) return e;
+  if (candidates < 1) return "candidates: at least 1";
+  if (rounds < 1) return "rounds: at least 1";
+  if (!(radius > 0)) return "radius: must be positive";
+  if (!(shrink > 0 && shrink < 1)) return "shrink: must be between 0 and 1";
+  if (!(good_enough >= 0)) return "good_enough: must be >= 0";
+  return {};
+}
+
+std::string PropagationOptions::validate() const {
+  if (auto e = movability.validate(); !e.empty()) return e;
+  if (!(step > 0 && step < 0.1)) return "step: must be in (0, 0.1) of the diagonal";
+  if (!(max_movability > 0)) return "max_movability: must be positive";
+  if (!(max_boundary_share > 0 && max_boundary_share <= 1)) return "max_boundary_share: must be in (0, 1]";
+  if (max_steps < 1) return "max_steps: at least 1";
+  return {};
+}
+
+const char* to_string(PropagationStop s) {
+  switch (s) {
+    case PropagationStop::Boundary: return "boundary";
+    case PropagationStop::Movability: return "movability";
+    case PropagationStop::NotMovable: return "not movable";
+    case PropagationStop::MaxSteps: return "max steps";
+  }
+  return "?";
+}
+
+Movability line_movability(const SurfaceIndex& surface, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                           const MovabilityOptions& o) {
+  Movability out;
+  const int n = o.samples;
+  const Eigen::Vector3d axis = b - a;
+  const double L = axis.norm();
+  if (!(L > 0)) return out;
+  const Eigen::Vector3d e = axis / L;
+  const auto [n1, n2] = normal_plane(e);
+
+  std::vector<Eigen::Vector3d> points(n);
+  for (int i = 0; i < n; ++i) {
+    const double s = double(i) / (n - 1);
+    points[i] = (1 - s) * a + s * b;
+  }
+  out.footpoints = surface.closest(points);
+
+  // A = (1/n) sum g_i g_i^T with <v_i, r_i> = g_i . x, x = (v_a, λ1, λ2), eq. (5).
+  Eigen::Matrix<double, 5, 5> A = Eigen::Matrix<double, 5, 5>::Zero();
+  int prev = -1;
+  bool branches = false;
+  for (int i = 0; i < n; ++i) {
+    const Footpoint& f = out.footpoints[i];
+    if (f.on_boundary) {
+      ++out.boundary_samples;
+      continue;
+    }
+    if (prev >= 0) {
+      // Remark 1: a jump of the footpoints along the line means a second branch of the characteristic.
+      const double line_step = (points[i] - points[prev]).norm();
+      if ((f.point - out.footpoints[prev].point).norm() > o.jump_ratio * line_step) branches = true;
+    }
+    prev = i;
+    Eigen::Vector3d r = points[i] - f.point;
+    const double len = r.norm();
+    r = len > 1e-12 ? Eigen::Vector3d(r / len) : f.normal;
+    const double s = double(i) / (n - 1);
+    Eigen::Matrix<double, 5, 1> g;
+    g << r, s * r.dot(n1), s * r.dot(n2);
+    A += g * g.transpose();
+    ++out.used_samples;
+  }
+  if (out.used_samples < 5) return out;
+  A /= out.used_samples;
+
+  // A line sliding along itself is the same line, so the normalisation (6) applies to the part of
+  // v_m normal to the line (otherwise every cylinder would be perfectly "movable" along its axis):
+  // y = (α, β, γ, λ1, λ2) with v_m = α n1 + β n2 + γ e, v_a = v_m - (λ1 n1 + λ2 n2)/2, α² + β² = 1.
+  Eigen::Matrix<double, 5, 5> T = Eigen::Matrix<double, 5, 5>::Zero();
+  T.block<3, 1>(0, 0) = n1;
+  T.block<3, 1>(0, 1) = n2;
+  T.block<3, 1>(0, 2) = e;
+  T.block<3, 1>(0, 3) = -0.5 * n1;
+  T.block<3, 1>(0, 4) = -0.5 * n2;
+  T(3, 3) = 1;
+  T(4, 4) = 1;
+  const Eigen::Matrix<double, 5, 5> Ay = T.transpose() * A * T;
+  const Eigen::Matrix2d P = Ay.topLeftCorner<2, 2>();
+  const Eigen::Matrix<double, 2, 3> Q = Ay.topRightCorner<2, 3>();
+  Eigen::Matrix3d R = Ay.bottomRightCorner<3, 3>();
+  // On nearly developable surfaces a tilted line can also glide along the rulings, almost purely by
+  // sliding along itself (F ~ 0 as well); a small price on the axial velocity γ makes the sweep
+  // across the surface, the motion a flank cut needs, the minimiser.
+  R(0, 0) += kSlidePrice * A.trace();
+  // Pseudo-inverse of R: components that do not change F (e.g. sliding of a cylinder) stay 0.
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> er(R);
+  Eigen::Matrix3d R_pinv = Eigen::Matrix3d::Zero();
+  // Components whose curvature is below 1e-6 of A's scale are treated as free: inverting them
+  // would turn rounding noise of the footpoints into huge axial or rotational velocities.
+  const double r_tol = 1e-6 * std::max(A.trace(), 1e-300);
+  for (int k = 0; k < 3; ++k)
+    if (er.eigenvalues()[k] > r_tol)
+      R_pinv += er.eigenvectors().col(k) * er.eigenvectors().col(k).transpose() / er.eigenvalues()[k];
+  const Eigen::Matrix2d S = P - Q * R_pinv * Q.transpose();  // Schur complement
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(S);
+  const Eigen::Vector2d ab = es.eigenvectors().col(0);  // smallest eigenvalue first
+  const Eigen::Vector3d rest = -R_pinv * Q.transpose() * ab;  // γ, λ1, λ2
+  out.F = std::max(0.0, es.eigenvalues()[0]);
+  const Eigen::Vector3d v_m = ab[0] * n1 + ab[1] * n2 + rest[0] * e;
+  const Eigen::Vector3d dv = rest[1] * n1 + rest[2] * n2;
+  out.v_a = v_m - 0.5 * dv;
+  out.v_b = out.v_a + dv;
+  out.movable = !branches;
+  return out;
+}
+
+ExploredLine explore_line(const SurfaceIndex& surface, const Eigen::Vector3d& a0, const Eigen::Vector3d& b0,
+                          const ExplorationOptions& o) {
+  ExploredLine best;
+  best.a = a0;
+  best.b = b0;
+  best.movability = line_movability(surface, a0, b0, o.movability);
+  best.F_start = best.movability.F;
+  best.lines_evaluated = 1;
+  const auto acceptable = [&](const Movability& m) { return m.movable && m.used_samples * 2 >= o.movability.samples; };
+  double best_F = acceptable(best.movability) ? best.movability.F : INFINITY;
+  double radius = o.radius;
+  for (int round = 0; round < o.rounds && !(best_F <= o.good_enough); ++round, radius *= o.shrink) {
+    const auto [n1, n2] = normal_plane((best.b - best.a).normalized());
+    std::mt19937 rng(o.seed + 7919u * unsigned(round));
+    std::uniform_real_distribution<double> u(0, 1);
+    const auto disc = [&]() {  // uniform in the disc of this round's radius; the first candidate is no change
+      const double r = radius * std::sqrt(u(rng)), phi = 2 * M_PI * u(rng);
+      return Eigen::Vector3d(r * std::cos(phi) * n1 + r * std::sin(phi) * n2);
+    };
+    std::vector<Eigen::Vector3d> da(o.candidates, Eigen::Vector3d::Zero()), db(o.candidates, Eigen::Vector3d::Zero());
+    for (int k = 1; k < o.candidates; ++k) da[k] = disc();
+    for (int k = 1; k < o.candidates; ++k) db[k] = disc();
+    const int count = o.candidates * o.candidates;
+    std::vector<Movability> results(count);
+#pragma omp parallel for schedule(dynamic, 8)
+    for (int k = 0; k < count; ++k)
+      results[k] = line_movability(surface, best.a + da[k / o.candidates], best.b + db[k % o.candidates], o.movability);
+    best.lines_evaluated += count;
+    int pick = -1;
+    // A candidate must lower F_l clearly (10%, and above rounding): where F_l is already near zero
+    // many lines are equally movable and the user's line should not wander among them.
+    for (int k = 0; k < count; ++k)
+      if (acceptable(results[k]) && results[k].F < 0.9 * best_F - 1e-12) {
+        best_F = results[k].F;
+        pick = k;
+      }
+    if (pick >= 0) {
+      best.a += da[pick / o.candidates];
+      best.b += db[pick % o.candidates];
+      best.movability = std::move(results[pick]);
+    }
+  }
+  return best;
+}
+
+namespace {
+
+// Walks from (a, b) along the best tangential field, direction +1 or -1; returns the
+// positions after the start and why it stopped.
+PropagationStop walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, int direction,
+                     const PropagationOptions& o, std::vector<Eigen::Vector3d>& as, std::vector<Eigen::Vector3d>& bs,
+                     std::vector<double>& Fs) {
+  const double L = (b - a).norm();
+  Eigen::Vector3d previous_vm = Eigen::Vector3d::Zero();
+  for (int step = 0; step < o.max_steps; ++step) {
+    const Movability m = line_movability(surface, a, b, o.movability);
+    if (step > 0) {
+      if (m.boundary_samples > o.max_boundary_share * o.movability.samples) return PropagationStop::Boundary;
+      if (!m.movable || m.used_samples < 5) return PropagationStop::NotMovable;
+      if (m.F > o.max_movability) return PropagationStop::Movability;
+      as.push_back(a);
+      bs.push_back(b);
+      Fs.push_back(m.F);
+    } else if (!m.movable || m.used_samples < 5) {
+      return PropagationStop::NotMovable;
+    }
+    Eigen::Vector3d va = m.v_a, vb = m.v_b;
+    const Eigen::Vector3d e = (b - a).normalized();
+    const Eigen::Vector3d vm = 0.5 * (va + vb) - 0.5 * (va + vb).dot(e) * e;  // normal part: |vm| = 1
+    // The eigenvector's sign is arbitrary: keep moving the way we went.
+    const double sign = step == 0 ? double(direction) : (vm.dot(previous_vm) >= 0 ? 1.0 : -1.0);
+    va *= sign;
+    vb *= sign;
+    previous_vm = sign * vm;
+    a += o.step * va;
+    b += o.step * vb;
+    const Eigen::Vector3d mid = 0.5 * (a + b), e_new = (b - a).normalized();
+    a = mid - 0.5 * L * e_new;  // keep the length L (rigid line)
+    b = mid + 0.5 * L * e_new;
+  }
+  return PropagationStop::MaxSteps;
+}
+
+}  // namespace
+
+LineTrajectory propagate_line(const SurfaceIndex& surface, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                              const PropagationOptions& o) {
+  LineTrajectory back, fwd;
+  const Movability m0 = line_movability(surface, a, b, o.movability);
+  back.stop_backward = walk(surface, a, b, -1, o, back.a, back.b, back.F);
+  fwd.stop_forward = walk(surface, a, b, +1, o, fwd.a, fwd.b, fwd.F);
+  LineTrajectory out;
+  out.stop_backward = back.stop_backward;
+  out.stop_forward = fwd.stop_forward;
+  out.a.assign(back.a.rbegin(), back.a.rend());
+  out.b.assign(back.b.rbegin(), back.b.rend());
+  out.F.assign(back.F.rbegin(), back.F.rend());
+  out.a.push_back(a);
+  out.b.push_back(b);
+  out.F.push_back(m0.F);
+  out.a.insert(out.a.end(), fwd.a.begin(), fwd.a.end());
+  out.b.insert(out.b.end(), fwd.b.begin(), fwd.b.end());
+  out.F.insert(out.F.end(), fwd.F.begin(), fwd.F.end());
+  return out;
+}
+
+}  // namespace flankcam
