@@ -1,0 +1,127 @@
+#include "core/fitting.h"
+
+#include <doctest/doctest.h>
+
+#include <Eigen/Geometry>
+#include <random>
+
+#include "core/machined_surface.h"
+
+using namespace flankcam;
+
+namespace {
+struct Case {
+  const char* motion;
+  const char* profile_name;
+  RadiusProfile profile;
+  ToolShape shape;
+};
+
+struct Exact {
+  LineMotion motion;
+  Similarity frame;
+  TriMesh unit_mesh;
+};
+
+Exact make_exact(const char* kind, const RadiusProfile& p) {
+  AnalyticMotionOptions o;
+  o.kind = kind;
+  const LineMotion m = analytic_motion(o);
+  const EnvelopeGrid g = envelope_grid(m, p, 66, 200, 1);
+  const Similarity s = unit_diagonal_frame(g.mesh);
+  return {m, s, transformed(g.mesh, s)};
+}
+
+// Perturbed by 1% of the diagonal and 2 degrees (the acceptance of issue 3).
+AxisLine perturbed(const Exact& ex, double t, std::mt19937& rng) {
+  std::normal_distribution<double> g;
+  const Eigen::Vector3d a = ex.frame.to_unit(ex.motion.a(t)), b = ex.frame.to_unit(ex.motion.b(t));
+  const Eigen::Vector3d off = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized() * 0.01;
+  const Eigen::Vector3d axis = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+  const Eigen::Vector3d mid = 0.5 * (a + b) + off, d = Eigen::AngleAxisd(2 * M_PI / 180, axis) * (b - a);
+  return {mid - 0.5 * d, mid + 0.5 * d};
+}
+
+double profile_error_mm(const FitResult& r, const Exact& ex, const RadiusProfile& truth) {
+  double worst = 0;
+  for (double s = 0.1; s <= 0.9; s += 0.1) worst = std::max(worst, std::abs(ex.frame.length_to_mm(r.tool.d(s)) - truth.d(s)));
+  return worst;
+}
+}  // namespace
+
+TEST_CASE("surface-driven fits of exact envelopes reach eps <= 1e-4 for every tool shape") {
+  const std::vector<Case> cases = {{"s-curve", "cylinder", cylinder_profile(6), ToolShape::Cylinder},
+                                   {"arc", "cone", cone_profile(6, 9), ToolShape::Cone},
+                                   {"twist", "barrel", barrel_profile(6, 1.5), ToolShape::General},
+                                   {"helix", "spline", spline_profile({5.0, 6.5, 7.5, 6.5, 7.0, 8.5}), ToolShape::General}};
+  for (const auto& c : cases) {
+    const std::string name = std::string(c.motion) + " " + c.profile_name;
+    CAPTURE(name);
+    const Exact ex = make_exact(c.motion, c.profile);
+    const SurfaceIndex surface(ex.unit_mesh);
+    std::mt19937 rng(3);
+    std::vector<AxisLine> lines;
+    for (double t : {0.0, 0.25, 0.5, 0.75, 1.0}) lines.push_back(perturbed(ex, t, rng));
+    FitOptions o;
+    o.shape = c.shape;
+    const FitResult r = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
+    MESSAGE(c.motion << " " << c.profile_name << ": eps_ini " << r.eps_ini.max << " eps_opt " << r.eps_opt.max
+                     << " profile error " << profile_error_mm(r, ex, c.profile) << " mm");
+    CHECK(r.eps_ini.max > 1e-3);
+    CHECK(r.eps_opt.max <= 1e-4);
+    CHECK(r.eps_opt.samples > 2000);
+    // The radius is only weakly determined on nearly developable envelopes (see FitOptions::w_anchor):
+    // it comes back within the 1% (1.3-1.6 mm) the lines were perturbed by.
+    CHECK(profile_error_mm(r, ex, c.profile) < 1.2);
+  }
+}
+
+TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4") {
+  const std::vector<Case> cases = {{"twist", "cylinder", cylinder_profile(6), ToolShape::Cylinder},
+                                   {"s-curve", "cone", cone_profile(6, 9), ToolShape::Cone},
+                                   {"helix", "barrel", barrel_profile(6, 1.5), ToolShape::General},
+                                   {"helix", "spline", spline_profile({5.0, 6.5, 7.5, 6.5, 7.0, 8.5}), ToolShape::General}};
+  for (const auto& c : cases) {
+    const std::string name = std::string(c.motion) + " " + c.profile_name;
+    CAPTURE(name);
+    const Exact ex = make_exact(c.motion, c.profile);
+    const SurfaceIndex surface(ex.unit_mesh);
+    std::mt19937 rng(3);
+    const AxisLine l = perturbed(ex, 0.5, rng);
+    const ExploredLine best = explore_line(surface, l.a, l.b);
+    const LineTrajectory tr = propagate_line(surface, best.a, best.b);
+    FitOptions o;
+    o.shape = c.shape;
+    const FitResult r = optimize_motion(surface, rails_from_trajectory(tr, o), o);
+    MESSAGE(c.motion << " " << c.profile_name << ": " << tr.a.size() << " positions, eps_ini " << r.eps_ini.max
+                     << " eps_opt " << r.eps_opt.max << " profile error " << profile_error_mm(r, ex, c.profile) << " mm");
+    CHECK(r.eps_opt.max <= 1e-4);
+  }
+}
+
+TEST_CASE("the machined envelope of a fit covers the exact envelope within the tolerance") {
+  const Exact ex = make_exact("arc", cone_profile(6, 9));
+  const SurfaceIndex surface(ex.unit_mesh);
+  std::vector<AxisLine> lines;
+  for (double t : {0.0, 0.5, 1.0}) lines.push_back({ex.frame.to_unit(ex.motion.a(t)), ex.frame.to_unit(ex.motion.b(t))});
+  FitOptions o;
+  o.shape = ToolShape::Cone;
+  const FitResult r = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
+  const MachinedSurface ms = machined_surface(surface, r.rails, r.tool);
+  CHECK(ms.omega.folded_triangles == 0);
+  const double tol = ex.frame.length_to_unit(0.01);  // 10 µm
+  const double cov = coverage(ex.unit_mesh, ms.design_deviation, tol);
+  MESSAGE("coverage within 0.01 mm: " << cov);
+  CHECK(cov > 0.8);
+  // Sign: moving the whole design surface towards the tool makes it overcut (negative).
+  TriMesh shifted = ex.unit_mesh;
+  const auto normals = vertex_normals(ex.unit_mesh);
+  for (size_t v = 0; v < shifted.vertices.size(); ++v) shifted.vertices[v] += ms.tool_side * tol * 5 * normals[v];
+  const SurfaceIndex shifted_index(shifted);
+  const MachinedSurface over = machined_surface(shifted_index, r.rails, r.tool);
+  double mean = 0;
+  int count = 0;
+  for (double d : over.design_deviation)
+    if (std::isfinite(d)) mean += d, ++count;
+  CHECK(mean / count < -3 * tol);
+}
