@@ -7,6 +7,7 @@
 #include <string>
 #include <unistd.h>
 
+#include "core/envelope.h"
 #include "core/mesh.h"
 
 namespace flankcam::test {
@@ -47,6 +48,21 @@ inline TriMesh wavy_grid(int nx, int ny, double sx, double sy, double amplitude)
       m.faces.push_back({v, v + nx + 1, v + nx});
     }
   return m;
+}
+
+// An exact envelope of an analytic motion, scaled to a unit diagonal (the fitting's frame).
+struct ExactEnvelope {
+  LineMotion motion;
+  Similarity frame;   // mm -> unit frame
+  TriMesh unit_mesh;  // the envelope in the unit frame
+};
+inline ExactEnvelope exact_envelope(const char* kind, const RadiusProfile& profile, int n_s = 66, int n_t = 200) {
+  AnalyticMotionOptions o;
+  o.kind = kind;
+  const LineMotion m = analytic_motion(o);
+  const EnvelopeGrid g = envelope_grid(m, profile, n_s, n_t, 1);
+  const Similarity s = unit_diagonal_frame(g.mesh);
+  return {m, s, transformed(g.mesh, s)};
 }
 
 }  // namespace flankcam::test

@@ -6,6 +6,7 @@
 #include <random>
 
 #include "core/machined_surface.h"
+#include "tests/test_util.h"
 
 using namespace flankcam;
 
@@ -17,20 +18,8 @@ struct Case {
   ToolShape shape;
 };
 
-struct Exact {
-  LineMotion motion;
-  Similarity frame;
-  TriMesh unit_mesh;
-};
-
-Exact make_exact(const char* kind, const RadiusProfile& p) {
-  AnalyticMotionOptions o;
-  o.kind = kind;
-  const LineMotion m = analytic_motion(o);
-  const EnvelopeGrid g = envelope_grid(m, p, 66, 200, 1);
-  const Similarity s = unit_diagonal_frame(g.mesh);
-  return {m, s, transformed(g.mesh, s)};
-}
+using Exact = test::ExactEnvelope;
+using test::exact_envelope;
 
 // Perturbed by 1% of the diagonal and 2 degrees (the acceptance of issue 3).
 AxisLine perturbed(const Exact& ex, double t, std::mt19937& rng) {
@@ -57,7 +46,7 @@ TEST_CASE("surface-driven fits of exact envelopes reach eps <= 1e-4 for every to
   for (const auto& c : cases) {
     const std::string name = std::string(c.motion) + " " + c.profile_name;
     CAPTURE(name);
-    const Exact ex = make_exact(c.motion, c.profile);
+    const Exact ex = exact_envelope(c.motion, c.profile);
     const SurfaceIndex surface(ex.unit_mesh);
     std::mt19937 rng(3);
     std::vector<AxisLine> lines;
@@ -84,7 +73,7 @@ TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4") {
   for (const auto& c : cases) {
     const std::string name = std::string(c.motion) + " " + c.profile_name;
     CAPTURE(name);
-    const Exact ex = make_exact(c.motion, c.profile);
+    const Exact ex = exact_envelope(c.motion, c.profile);
     const SurfaceIndex surface(ex.unit_mesh);
     std::mt19937 rng(3);
     const AxisLine l = perturbed(ex, 0.5, rng);
@@ -100,7 +89,7 @@ TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4") {
 }
 
 TEST_CASE("the machined envelope of a fit covers the exact envelope within the tolerance") {
-  const Exact ex = make_exact("arc", cone_profile(6, 9));
+  const Exact ex = exact_envelope("arc", cone_profile(6, 9));
   const SurfaceIndex surface(ex.unit_mesh);
   std::vector<AxisLine> lines;
   for (double t : {0.0, 0.5, 1.0}) lines.push_back({ex.frame.to_unit(ex.motion.a(t)), ex.frame.to_unit(ex.motion.b(t))});

@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 
 #include "core/envelope.h"
+#include "tests/test_util.h"
 
 using namespace flankcam;
 
@@ -15,12 +16,8 @@ struct Exact {
   SurfaceIndex surface;
 };
 Exact exact_envelope(const char* kind, const RadiusProfile& profile) {
-  AnalyticMotionOptions o;
-  o.kind = kind;
-  LineMotion m = analytic_motion(o);
-  const EnvelopeGrid g = envelope_grid(m, profile, 66, 200, 1);
-  const Similarity s = unit_diagonal_frame(g.mesh);
-  return {m, s, SurfaceIndex(transformed(g.mesh, s))};
+  test::ExactEnvelope e = test::exact_envelope(kind, profile);
+  return {e.motion, e.frame, SurfaceIndex(std::move(e.unit_mesh))};
 }
 }  // namespace
 
