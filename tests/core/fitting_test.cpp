@@ -114,3 +114,50 @@ TEST_CASE("the machined envelope of a fit covers the exact envelope within the t
     if (std::isfinite(d)) mean += d, ++count;
   CHECK(mean / count < -3 * tol);
 }
+
+namespace {
+// Surface-driven fit on a (modified) copy of an exact envelope, from exact lines at t = 0, 0.5, 1.
+FitResult fit_modified(const Exact& ex, const TriMesh& surface_mesh, ToolShape shape) {
+  const SurfaceIndex surface(clean_mesh(surface_mesh, "test").mesh);
+  std::vector<AxisLine> lines;
+  for (double t : {0.0, 0.5, 1.0}) lines.push_back({ex.frame.to_unit(ex.motion.a(t)), ex.frame.to_unit(ex.motion.b(t))});
+  FitOptions o;
+  o.shape = shape;
+  return optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
+}
+
+// ε (eq. 13) of a fit measured against the clean, complete envelope: how far the tool found on the
+// modified surface is from machining the true one (the motion itself is not unique, see w_anchor).
+double eps_on(const SurfaceIndex& clean, const FitResult& r) { return sample_error(clean, r.rails, r.tool, {}).max; }
+}  // namespace
+
+TEST_CASE("noise of 1e-4 of the diagonal and two trimmed holes barely move the fitted motion") {
+  const Exact ex = exact_envelope("arc", cone_profile(6, 9));
+  const SurfaceIndex complete(ex.unit_mesh);
+
+  TriMesh noisy = ex.unit_mesh;
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-1e-4, 1e-4);
+  for (auto& v : noisy.vertices) v += Eigen::Vector3d(u(rng), u(rng), u(rng));
+  const FitResult with_noise = fit_modified(ex, noisy, ToolShape::Cone);
+  MESSAGE("noise: eps on the noisy mesh " << with_noise.eps_opt.max << ", on the clean envelope " << eps_on(complete, with_noise));
+  CHECK(eps_on(complete, with_noise) < 3e-4);
+
+  TriMesh holed = ex.unit_mesh;
+  std::vector<std::array<int, 3>> kept;
+  const Eigen::Vector3d h1 = ex.frame.to_unit(0.5 * (ex.motion.a(0.3) + ex.motion.b(0.3))),
+                        h2 = ex.frame.to_unit(0.5 * (ex.motion.a(0.7) + ex.motion.b(0.7)));
+  for (const auto& f : holed.faces) {
+    const Eigen::Vector3d c = (holed.vertices[f[0]] + holed.vertices[f[1]] + holed.vertices[f[2]]) / 3;
+    if ((c - h1).norm() < 0.09 || (c - h2).norm() < 0.07) continue;  // the axis is ~0.05 from Φ
+    kept.push_back(f);
+  }
+  const size_t removed = holed.faces.size() - kept.size();
+  holed.faces = kept;
+  const FitResult with_holes = fit_modified(ex, holed, ToolShape::Cone);
+  MESSAGE("holes: " << removed << " faces removed, eps " << with_holes.eps_opt.max << ", on the complete envelope "
+                    << eps_on(complete, with_holes));
+  CHECK(removed > 200);
+  CHECK(with_holes.eps_opt.max <= 1e-4);
+  CHECK(eps_on(complete, with_holes) < 1e-4);
+}
