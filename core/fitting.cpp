@@ -173,8 +173,6 @@ class RigidResidual final : public ceres::SizedCostFunction<1, 3, 3, 3, 3, 3, 3,
   double L2_, w_;
 };
 
-std::vector<double> sample_params(int count) { return uniform_parameters(count); }
-
 // Footpoints of the m x n samples R(t_i, s_j), row-major in i.
 std::vector<Footpoint> sample_footpoints(const SurfaceIndex& surface, const Rails& rails, int m, int n) {
   std::vector<Eigen::Vector3d> pts(size_t(m) * n);
@@ -236,7 +234,7 @@ Rails rails_from_lines(const std::vector<AxisLine>& lines, int rail, double leng
   const BSpline sa = spline_through(pa, tl), sb = spline_through(pb, tl);
   const int samples = std::max(4 * o.samples_t, 200);
   std::vector<Eigen::Vector3d> A, B;
-  const std::vector<double> ts = sample_params(samples);
+  const std::vector<double> ts = uniform_parameters(samples);
   for (double t : ts) {
     const Eigen::Vector3d a = sa.point(t), b = sb.point(t);
     const Eigen::Vector3d dir = (b - a).normalized();
@@ -384,13 +382,11 @@ ErrorStats sample_error(const SurfaceIndex& surface, const Rails& rails, const T
   for (int i = 0; i < m; ++i)
     for (int j = 0; j < n; ++j) {
       const Footpoint& f = fps[size_t(i) * n + j];
-      const double s = double(j) / (n - 1);
-      const Eigen::Vector3d p = rails.point(double(i) / (m - 1), s);
       if (f.on_boundary) {  // the footpoint is on Φ's rim: the sample is beyond Φ, not an error of it
         ++e.excluded;
         continue;
       }
-      errs.push_back(std::abs((p - f.point).norm() - tool.d(s)));
+      errs.push_back(std::abs(f.distance - tool.d(double(j) / (n - 1))));
     }
   e.samples = int(errs.size());
   if (errs.empty()) return e;

@@ -3,6 +3,8 @@
 #include <cmath>
 #include <limits>
 
+#include "core/errors.h"
+
 namespace flankcam {
 
 std::string MachinedSurfaceOptions::validate() const {
@@ -23,6 +25,7 @@ int tool_side(const SurfaceIndex& design, const Rails& rails) {
 
 MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails, const ToolRadius& tool,
                                  const MachinedSurfaceOptions& o) {
+  if (auto err = o.validate(); !err.empty()) throw InputError(err);
   MachinedSurface out;
   const LineMotion motion = to_motion(rails);
   const RadiusProfile profile = tool.profile();

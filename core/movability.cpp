@@ -5,6 +5,8 @@
 #include <cmath>
 #include <random>
 
+#include "core/errors.h"
+
 namespace flankcam {
 
 namespace {
@@ -144,6 +146,7 @@ Movability line_movability(const SurfaceIndex& surface, const Eigen::Vector3d& a
 
 ExploredLine explore_line(const SurfaceIndex& surface, const Eigen::Vector3d& a0, const Eigen::Vector3d& b0,
                           const ExplorationOptions& o) {
+  if (auto err = o.validate(); !err.empty()) throw InputError("exploration." + err);
   ExploredLine best;
   best.a = a0;
   best.b = b0;
@@ -189,24 +192,39 @@ ExploredLine explore_line(const SurfaceIndex& surface, const Eigen::Vector3d& a0
 
 namespace {
 
-// Walks from (a, b) along the best tangential field, direction +1 or -1; returns the
-// positions after the start and why it stopped.
-PropagationStop walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, int direction,
-                     const PropagationOptions& o, std::vector<Eigen::Vector3d>& as, std::vector<Eigen::Vector3d>& bs,
-                     std::vector<double>& Fs) {
+struct Walk {
+  std::vector<Eigen::Vector3d> a, b;  // positions after the start
+  std::vector<double> F;
+  PropagationStop stop = PropagationStop::MaxSteps;
+};
+
+// Walks from (a, b), whose movability is `start`, along the best tangential field in
+// direction +1 or -1, keeping the length.
+Walk walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, Movability m, int direction,
+          const PropagationOptions& o) {
+  Walk w;
   const double L = (b - a).norm();
   Eigen::Vector3d previous_vm = Eigen::Vector3d::Zero();
   for (int step = 0; step < o.max_steps; ++step) {
-    const Movability m = line_movability(surface, a, b, o.movability);
     if (step > 0) {
-      if (m.boundary_samples > o.max_boundary_share * o.movability.samples) return PropagationStop::Boundary;
-      if (!m.movable || m.used_samples < 5) return PropagationStop::NotMovable;
-      if (m.F > o.max_movability) return PropagationStop::Movability;
-      as.push_back(a);
-      bs.push_back(b);
-      Fs.push_back(m.F);
-    } else if (!m.movable || m.used_samples < 5) {
-      return PropagationStop::NotMovable;
+      m = line_movability(surface, a, b, o.movability);
+      if (m.boundary_samples > o.max_boundary_share * o.movability.samples) {
+        w.stop = PropagationStop::Boundary;
+        return w;
+      }
+    }
+    if (!m.movable || m.used_samples < 5) {
+      w.stop = PropagationStop::NotMovable;
+      return w;
+    }
+    if (step > 0) {
+      if (m.F > o.max_movability) {
+        w.stop = PropagationStop::Movability;
+        return w;
+      }
+      w.a.push_back(a);
+      w.b.push_back(b);
+      w.F.push_back(m.F);
     }
     Eigen::Vector3d va = m.v_a, vb = m.v_b;
     const Eigen::Vector3d e = (b - a).normalized();
@@ -222,20 +240,19 @@ PropagationStop walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vect
     a = mid - 0.5 * L * e_new;  // keep the length L (rigid line)
     b = mid + 0.5 * L * e_new;
   }
-  return PropagationStop::MaxSteps;
+  return w;
 }
 
 }  // namespace
 
 LineTrajectory propagate_line(const SurfaceIndex& surface, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
                               const PropagationOptions& o) {
-  LineTrajectory back, fwd;
+  if (auto err = o.validate(); !err.empty()) throw InputError("propagation." + err);
   const Movability m0 = line_movability(surface, a, b, o.movability);
-  back.stop_backward = walk(surface, a, b, -1, o, back.a, back.b, back.F);
-  fwd.stop_forward = walk(surface, a, b, +1, o, fwd.a, fwd.b, fwd.F);
+  const Walk back = walk(surface, a, b, m0, -1, o), fwd = walk(surface, a, b, m0, +1, o);
   LineTrajectory out;
-  out.stop_backward = back.stop_backward;
-  out.stop_forward = fwd.stop_forward;
+  out.stop_backward = back.stop;
+  out.stop_forward = fwd.stop;
   out.a.assign(back.a.rbegin(), back.a.rend());
   out.b.assign(back.b.rbegin(), back.b.rend());
   out.F.assign(back.F.rbegin(), back.F.rend());
