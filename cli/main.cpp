@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
     commands.emplace_back(app.get_subcommands({})[before], std::move(run));
   };
   register_command(&flankcam::cli::add_envelope_command);
+  register_command(&flankcam::cli::add_fit_command);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

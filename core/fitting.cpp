@@ -41,6 +41,7 @@ std::string FitOptions::validate() const {
   if (max_iterations < 1) return "max_iterations: at least 1";
   if (solver_iterations < 1) return "solver_iterations: at least 1";
   if (!(stall >= 0)) return "stall: must be >= 0";
+  if (!(robust_scale >= 0) || !std::isfinite(robust_scale)) return "robust_scale: must be finite and >= 0";
   if (threads < 1) return "threads: at least 1";
   return {};
 }
@@ -429,8 +430,11 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     const auto fps = sample_footpoints(surface, result.rails, m, n);
 
     ceres::Problem::Options po;
+    po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     ceres::Problem problem(po);
     const double w_plane = std::sqrt(o.w_plane / (double(m) * n)), w_point = std::sqrt(o.w_point / (double(m) * n));
+    ceres::CauchyLoss robust(w_plane * o.robust_scale);
+    ceres::LossFunction* loss = o.robust_scale > 0 ? &robust : nullptr;
     for (int i = 0; i < m; ++i) {
       const BasisRow& row = rows[size_t(i)];
       std::vector<double*> blocks;
@@ -445,7 +449,7 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
         if (!plane) continue;  // the axis point is beyond Φ's boundary: no data there
         const Eigen::Vector3d nrm = *plane;
         problem.AddResidualBlock(new SampleResidual(row, s, f.point, nrm, tool_basis[size_t(j)], w_plane, w_point),
-                                 nullptr, blocks);
+                                 loss, blocks);
       }
       // F_rigid, eq. (9), soft.
       if (o.w_rigid > 0)
@@ -506,6 +510,7 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     const double objective = 2 * summary.final_cost;  // F_motion, eq. (12)
     result.objective.push_back(objective);
     result.iterations = iter + 1;
+    if (o.on_iteration) o.on_iteration(result.iterations, objective);
     // The footpoints (and which samples lie beyond Φ) change between solves, so progress is
     // judged within a solve: converged when one round cannot lower its own objective.
     if (objective <= 0 || summary.initial_cost - summary.final_cost < o.stall * summary.initial_cost) {

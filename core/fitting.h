@@ -4,6 +4,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <array>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -34,7 +35,13 @@ struct FitOptions {
   int max_iterations = 25;           // outer iterations (footpoints recomputed between solves)
   int solver_iterations = 5;         // Levenberg-Marquardt iterations per outer iteration
   double stall = 1e-2;               // stop when a round lowers its objective by less than this, relatively
+  // Scale of a Cauchy loss on the sample residuals (unit frame; not in the paper): samples whose
+  // distance error is well above it (a local bump, a fillet, a damaged scan) stop pulling the motion.
+  // 0: plain least squares as in the paper. Exact-envelope fits are unchanged by it (tests).
+  double robust_scale = 1e-4;
   int threads = 2;
+  // Called after each outer iteration with its number (1-based) and F_motion; may be empty.
+  std::function<void(int iteration, double objective)> on_iteration;
   std::string validate() const;      // empty when valid, else names the field
 };
 

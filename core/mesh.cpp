@@ -335,7 +335,7 @@ void write_ply(const std::string& path, const TriMesh& mesh, const std::vector<s
       const auto& v = mesh.vertices[i];
       const auto c = i < colors.size() ? colors[i] : std::array<unsigned char, 3>{200, 200, 200};
       fmt::format_to(o, "{:.9f} {:.9f} {:.9f} {} {} {}", v.x(), v.y(), v.z(), c[0], c[1], c[2]);
-      if (!scalar.empty()) fmt::format_to(o, " {:.9f}", std::isfinite(scalar[i]) ? scalar[i] : 0.0);
+      if (!scalar.empty()) fmt::format_to(o, " {:.9f}", scalar[i]);  // "nan" where undefined
       fmt::format_to(o, "\n");
     }
     for (const auto& f : mesh.faces) fmt::format_to(o, "3 {} {} {}\n", f[0], f[1], f[2]);

@@ -2,7 +2,10 @@
 #pragma once
 #include <Eigen/Core>
 #include <filesystem>
+#include <cstdlib>
 #include <fstream>
+#include <iterator>
+#include <sys/wait.h>
 #include <random>
 #include <string>
 #include <unistd.h>
@@ -32,6 +35,25 @@ struct ScratchDir {
 inline void write_text(const std::string& path, const std::string& text) {
   std::ofstream(path, std::ios::binary) << text;
 }
+
+inline std::string read_text(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+#ifdef FLANKCAM_BINARY
+// Runs the flankcam program with `args`; returns its exit code and what it wrote to stderr.
+struct RunResult {
+  int code = -1;
+  std::string err;
+};
+inline RunResult run_flankcam(const std::string& args, const ScratchDir& dir) {
+  const std::string err = dir.file("stderr.txt");
+  const std::string cmd = std::string(FLANKCAM_BINARY) + " " + args + " > /dev/null 2> " + err;
+  const int status = std::system(cmd.c_str());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, read_text(err)};
+}
+#endif
 
 // A wavy height field z = f(x, y) on an nx x ny grid over [0, sx] x [0, sy] (mm).
 inline TriMesh wavy_grid(int nx, int ny, double sx, double sy, double amplitude) {

@@ -54,7 +54,7 @@ TEST_CASE("surface-driven fits of exact envelopes reach eps <= 1e-4 for every to
     FitOptions o;
     o.shape = c.shape;
     const FitResult r = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
-    MESSAGE(c.motion << " " << c.profile_name << ": eps_ini " << r.eps_ini.max << " eps_opt " << r.eps_opt.max
+    MESSAGE(name << ": eps_ini " << r.eps_ini.max << " eps_opt " << r.eps_opt.max
                      << " profile error " << profile_error_mm(r, ex, c.profile) << " mm");
     CHECK(r.eps_ini.max > 1e-3);
     CHECK(r.eps_opt.max <= 1e-4);
@@ -82,7 +82,7 @@ TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4") {
     FitOptions o;
     o.shape = c.shape;
     const FitResult r = optimize_motion(surface, rails_from_trajectory(tr, o), o);
-    MESSAGE(c.motion << " " << c.profile_name << ": " << tr.a.size() << " positions, eps_ini " << r.eps_ini.max
+    MESSAGE(name << ": " << tr.a.size() << " positions, eps_ini " << r.eps_ini.max
                      << " eps_opt " << r.eps_opt.max << " profile error " << profile_error_mm(r, ex, c.profile) << " mm");
     CHECK(r.eps_opt.max <= 1e-4);
   }
@@ -160,4 +160,52 @@ TEST_CASE("noise of 1e-4 of the diagonal and two trimmed holes barely move the f
   CHECK(removed > 200);
   CHECK(with_holes.eps_opt.max <= 1e-4);
   CHECK(eps_on(complete, with_holes) < 1e-4);
+}
+
+TEST_CASE("a local bump on the design surface: the fit stays on the undisturbed part and coverage drops") {
+  const Exact ex = exact_envelope("arc", cone_profile(6, 9));
+  const SurfaceIndex clean(ex.unit_mesh);
+  std::vector<AxisLine> lines;
+  for (double t : {0.0, 0.5, 1.0}) lines.push_back({ex.frame.to_unit(ex.motion.a(t)), ex.frame.to_unit(ex.motion.b(t))});
+  // A smooth bump of 0.3% of the diagonal (about 0.4 mm) out of the material, in the middle of the sweep.
+  const auto normals = vertex_normals(ex.unit_mesh);
+  const Eigen::Vector3d c0 = clean.closest(0.5 * (lines[1].a + lines[1].b)).point;
+  const double height = 0.003, sigma = 0.03;
+  const int side = tool_side(clean, rails_from_lines(lines, 0, 0, FitOptions{}));
+  TriMesh bumped = ex.unit_mesh;
+  std::vector<char> disturbed(bumped.vertices.size(), 0);
+  for (size_t v = 0; v < bumped.vertices.size(); ++v) {
+    const double r = (ex.unit_mesh.vertices[v] - c0).norm();
+    bumped.vertices[v] += side * height * std::exp(-0.5 * r * r / (sigma * sigma)) * normals[v];
+    disturbed[v] = r < 3 * sigma;
+  }
+  const SurfaceIndex surface(bumped);
+  const double tol = ex.frame.length_to_unit(0.01);  // 10 µm
+  struct Outcome {
+    double worst_outside, cov_clean, cov_bumped;
+  };
+  const auto fit = [&](double robust) {
+    FitOptions o;
+    o.shape = ToolShape::Cone;
+    o.robust_scale = robust;
+    const FitResult r = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
+    const MachinedSurface on_clean = machined_surface(clean, r.rails, r.tool);
+    const MachinedSurface on_bumped = machined_surface(surface, r.rails, r.tool);
+    Outcome out{0, coverage(ex.unit_mesh, on_clean.design_deviation, tol), coverage(bumped, on_bumped.design_deviation, tol)};
+    for (size_t v = 0; v < disturbed.size(); ++v)
+      if (!disturbed[v] && std::isfinite(on_clean.design_deviation[v]))
+        out.worst_outside = std::max(out.worst_outside, std::abs(on_clean.design_deviation[v]));
+    MESSAGE("robust scale " << robust << ": worst deviation from the clean envelope outside the bump "
+                            << ex.frame.length_to_mm(out.worst_outside) << " mm, coverage (10 µm) of the clean surface "
+                            << out.cov_clean << ", of the bumped one " << out.cov_bumped);
+    return out;
+  };
+  const Outcome robust = fit(FitOptions{}.robust_scale), least_squares = fit(0.0);
+  // Default (Cauchy loss): the machined surface stays on the clean envelope away from the bump ...
+  CHECK(robust.worst_outside < ex.frame.length_to_unit(0.01));
+  CHECK(robust.cov_clean > 0.95);
+  // ... and the bump is left uncut, so coverage of the bumped design surface drops.
+  CHECK(robust.cov_bumped < robust.cov_clean - 0.03);
+  // Plain least squares (the paper) is pulled towards the bump everywhere.
+  CHECK(least_squares.worst_outside > 5 * robust.worst_outside);
 }

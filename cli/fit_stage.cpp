@@ -1,0 +1,218 @@
+#include "cli/fit_stage.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+
+#include "core/atomic_file.h"
+#include "core/errors.h"
+
+namespace flankcam::cli {
+
+double round_mm(double x) { return std::isfinite(x) ? std::round(x * 1e6) / 1e6 + 0.0 : x; }  // + 0.0: no "-0"
+
+namespace {
+Eigen::Vector3d point(const std::array<double, 6>& l, int end) { return {l[3 * end], l[3 * end + 1], l[3 * end + 2]}; }
+
+PatchSpec unit_spec(const PatchJob& p, const Similarity& frame) {
+  PatchSpec s;
+  s.name = p.name;
+  s.init = p.init;
+  s.rail = p.rail;
+  s.length = p.length_mm > 0 ? frame.length_to_unit(p.length_mm) : 0;
+  for (const auto& l : p.lines_mm) s.lines.push_back({frame.to_unit(point(l, 0)), frame.to_unit(point(l, 1))});
+  return s;
+}
+
+nlohmann::ordered_json vec_mm(const Eigen::Vector3d& v) { return {round_mm(v.x()), round_mm(v.y()), round_mm(v.z())}; }
+
+nlohmann::ordered_json error_report(const ErrorStats& e, const Similarity& frame) {
+  nlohmann::ordered_json h = nlohmann::ordered_json::array();
+  for (size_t k = 0; k < e.histogram.size(); ++k)
+    h.push_back({{"from_mm", round_mm(frame.length_to_mm(e.bin_edges[k]))},
+                 {"to_mm", round_mm(frame.length_to_mm(e.bin_edges[k + 1]))},
+                 {"samples", e.histogram[k]}});
+  return {{"max_relative", e.max},
+          {"max_mm", round_mm(frame.length_to_mm(e.max))},
+          {"mean_relative", e.mean},
+          {"mean_mm", round_mm(frame.length_to_mm(e.mean))},
+          {"samples", e.samples},
+          {"excluded_beyond_boundary", e.excluded},
+          {"histogram", h}};
+}
+}  // namespace
+
+FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
+  FittedJob out;
+  out.surface = load_mesh(job.surface.string());
+  const TriMesh& mesh = out.surface.mesh;
+  const BoundingBox box = bounding_box(mesh.vertices);
+  progress(fmt::format("surface {}: {} vertices, {} triangles, diagonal {:.3f} mm", job.surface.string(),
+                       mesh.vertices.size(), mesh.faces.size(), box.diagonal()));
+  out.frame = unit_diagonal_frame(mesh);
+  out.unit_surface = transformed(mesh, out.frame);
+  const SurfaceIndex index(out.unit_surface);
+  for (const PatchJob& p : job.patches) {
+    PatchOptions o;
+    o.fit = job.fit;
+    o.fit.threads = threads;
+    if (job.robust_mm) o.fit.robust_scale = out.frame.length_to_unit(*job.robust_mm);
+    o.tolerance = out.frame.length_to_unit(job.tolerance_mm);
+    o.on_stage = [&](const std::string& s) { progress(fmt::format("patch {}: {}", p.name, s)); };
+    o.fit.on_iteration = [&](int it, double objective) {
+      progress(fmt::format("patch {}: iteration {}, F_motion {:.3e}", p.name, it, objective));
+    };
+    FittedPatch fp{&p, fit_patch(index, unit_spec(p, out.frame), o)};
+    const FitResult& r = fp.fit.fit;
+    progress(fmt::format("patch {}: eps {:.2e} -> {:.2e} of the diagonal ({:.4f} mm), coverage {:.1f}% within {} mm, "
+                         "{:.1f} s + {:.1f} s",
+                         p.name, r.eps_ini.max, r.eps_opt.max, out.frame.length_to_mm(r.eps_opt.max),
+                         100 * fp.fit.coverage, job.tolerance_mm, fp.fit.seconds_init, fp.fit.seconds_opt));
+    out.patches.push_back(std::move(fp));
+  }
+  return out;
+}
+
+std::vector<std::array<unsigned char, 3>> deviation_colors(const std::vector<double>& dev, double tol) {
+  std::vector<std::array<unsigned char, 3>> c(dev.size());
+  const auto mix = [](std::array<double, 3> p, std::array<double, 3> q, double u) {
+    u = std::clamp(u, 0.0, 1.0);
+    return std::array<unsigned char, 3>{static_cast<unsigned char>(std::lround(p[0] + u * (q[0] - p[0]))),
+                                        static_cast<unsigned char>(std::lround(p[1] + u * (q[1] - p[1]))),
+                                        static_cast<unsigned char>(std::lround(p[2] + u * (q[2] - p[2])))};
+  };
+  const std::array<double, 3> green{60, 170, 80}, red{215, 40, 40}, blue{40, 80, 215};
+  for (size_t i = 0; i < dev.size(); ++i) {
+    const double d = dev[i];
+    if (!std::isfinite(d))
+      c[i] = {170, 170, 170};
+    else if (std::abs(d) <= tol)
+      c[i] = mix(green, green, 0);
+    else
+      c[i] = mix(green, d > 0 ? red : blue, (std::abs(d) - tol) / (3 * tol));
+  }
+  return c;
+}
+
+nlohmann::ordered_json surface_report(const Job& job, const FittedJob& f) {
+  const TriMesh& m = f.surface.mesh;
+  const MeshTopology topo = mesh_topology(m);
+  const BoundingBox box = bounding_box(m.vertices);
+  return {{"file", job.surface.string()},
+          {"vertices", m.vertices.size()},
+          {"triangles", m.faces.size()},
+          {"components", topo.components},
+          {"boundary_edges", topo.boundary_edges},
+          {"diagonal_mm", round_mm(box.diagonal())},
+          {"area_mm2", round_mm(surface_area(m))},
+          {"bbox_min_mm", vec_mm(box.min)},
+          {"bbox_max_mm", vec_mm(box.max)},
+          {"read", {{"polygons_triangulated", f.surface.report.polygons_triangulated},
+                    {"dropped_degenerate", f.surface.report.dropped_degenerate},
+                    {"dropped_duplicate", f.surface.report.dropped_duplicate},
+                    {"flipped_to_orient", f.surface.report.flipped_to_orient}}}};
+}
+
+nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const FittedPatch& p) {
+  const Similarity& fr = f.frame;
+  const FitResult& r = p.fit.fit;
+  const int m = job.fit.samples_t, n = job.fit.samples_s;
+  nlohmann::ordered_json j;
+  j["name"] = p.job->name;
+  j["init"] = to_string(p.job->init);
+  j["eps_ini"] = r.eps_ini.max;
+  j["eps_opt"] = r.eps_opt.max;
+  j["eps_opt_mm"] = round_mm(fr.length_to_mm(r.eps_opt.max));
+  j["eps_note"] = "eps_* are relative to the design surface's bounding-box diagonal (eq. 13); *_mm in mm";
+  j["error_initial"] = error_report(r.eps_ini, fr);
+  j["error_optimised"] = error_report(r.eps_opt, fr);
+  auto& axis = j["axis"] = nlohmann::ordered_json::array();
+  for (int i = 0; i < m; ++i) {
+    const double t = double(i) / (m - 1);
+    const Eigen::Vector3d a = fr.to_mm(r.rails.a.point(t)), b = fr.to_mm(r.rails.b.point(t));
+    axis.push_back({round_mm(a.x()), round_mm(a.y()), round_mm(a.z()), round_mm(b.x()), round_mm(b.y()), round_mm(b.z())});
+  }
+  auto& radius = j["radius"] = nlohmann::ordered_json::array();
+  for (int k = 0; k < n; ++k) radius.push_back(round_mm(fr.length_to_mm(r.tool.d(double(k) / (n - 1)))));
+
+  const double L = fr.length_to_mm(r.rails.length);
+  nlohmann::ordered_json tool;
+  tool["shape"] = to_string(r.tool.shape);
+  tool["length"] = round_mm(L);
+  auto& profile = tool["profile"] = nlohmann::ordered_json::array();
+  double rmin = INFINITY, rmax = 0;
+  for (const Eigen::Vector2d& zr : meridian(r.tool, r.rails.length)) {
+    profile.push_back({round_mm(fr.length_to_mm(zr.x())), round_mm(fr.length_to_mm(zr.y()))});
+    rmin = std::min(rmin, fr.length_to_mm(zr.y()));
+    rmax = std::max(rmax, fr.length_to_mm(zr.y()));
+  }
+  tool["profile_note"] = "meridian [z, r] in mm, z along the axis from the tool tip end (a) towards b";
+  tool["diameter_min"] = round_mm(2 * rmin);
+  tool["diameter_max"] = round_mm(2 * rmax);
+  if (r.tool.shape == ToolShape::Cone) {
+    const double d0 = fr.length_to_mm(r.tool.d(0)), d1 = fr.length_to_mm(r.tool.d(1));
+    tool["cone_half_angle_deg"] = std::round(std::atan2(d1 - d0, L) * 180 / M_PI * 1e6) / 1e6;
+  }
+  j["tool"] = tool;
+  j["coverage"] = p.fit.coverage;
+  j["tolerance_mm"] = job.tolerance_mm;
+  double dmin = INFINITY, dmax = -INFINITY;
+  int uncovered = 0;
+  for (double d : p.fit.machined.design_deviation) {
+    if (!std::isfinite(d)) {
+      ++uncovered;
+      continue;
+    }
+    dmin = std::min(dmin, d);
+    dmax = std::max(dmax, d);
+  }
+  j["deviation"] = {{"note", "design surface vs machined envelope along the surface normal: undercut > 0, overcut < 0"},
+                    {"min_mm", std::isfinite(dmin) ? round_mm(fr.length_to_mm(dmin)) : 0.0},
+                    {"max_mm", std::isfinite(dmax) ? round_mm(fr.length_to_mm(dmax)) : 0.0},
+                    {"vertices_not_reached", uncovered},
+                    {"envelope_folded_triangles", p.fit.machined.omega.folded_triangles}};
+  j["iterations"] = r.iterations;
+  j["converged"] = r.converged;
+  if (p.fit.explored) {
+    j["exploration"] = {{"F_user_line", p.fit.explored->F_start},
+                        {"F_explored", p.fit.explored->movability.F},
+                        {"lines_evaluated", p.fit.explored->lines_evaluated},
+                        {"line_mm", {vec_mm(fr.to_mm(p.fit.explored->a)), vec_mm(fr.to_mm(p.fit.explored->b))}}};
+    j["propagation"] = {{"positions", p.fit.trajectory->a.size()},
+                        {"stop_backward", to_string(p.fit.trajectory->stop_backward)},
+                        {"stop_forward", to_string(p.fit.trajectory->stop_forward)}};
+  }
+  j["seconds"] = {{"init", std::round(p.fit.seconds_init * 1000) / 1000},
+                  {"optimisation", std::round(p.fit.seconds_opt * 1000) / 1000}};
+  return j;
+}
+
+std::vector<std::string> write_patch_files(const std::filesystem::path& out, const Job& job, const FittedJob& f,
+                                           const FittedPatch& p) {
+  const Similarity& fr = f.frame;
+  const std::string& name = p.job->name;
+  const MachinedSurface& ms = p.fit.machined;
+  const auto to_mm = [&](std::vector<double> v) {
+    for (double& x : v) x = fr.length_to_mm(x);
+    return v;
+  };
+  const std::string tol = fmt::format("tolerance {} mm; deviation_mm > 0 undercut, < 0 overcut, nan not reached", job.tolerance_mm);
+
+  TriMesh omega = ms.omega.mesh;
+  for (auto& v : omega.vertices) v = fr.to_mm(v);
+  const std::vector<double> omega_dev = to_mm(ms.omega_deviation);
+  write_ply((out / (name + "-envelope.ply")).string(), omega, deviation_colors(omega_dev, job.tolerance_mm), omega_dev,
+            "deviation_mm", "machined envelope of patch " + name + "; " + tol);
+  const std::vector<double> design_dev = to_mm(ms.design_deviation);
+  write_ply((out / (name + "-deviation.ply")).string(), f.surface.mesh, deviation_colors(design_dev, job.tolerance_mm),
+            design_dev, "deviation_mm", "design surface vs patch " + name + "; " + tol);
+  write_file_atomically((out / (name + "-tool.csv")).string(), [&](std::ostream& o) {
+    o << "# tool of patch " << name << ": meridian of a " << to_string(p.fit.fit.tool.shape)
+      << " tool, mm, z along the axis from the tip end\nz_mm,r_mm\n";
+    for (const Eigen::Vector2d& zr : meridian(p.fit.fit.tool, p.fit.fit.rails.length))
+      o << fmt::format("{:.6f},{:.6f}\n", round_mm(fr.length_to_mm(zr.x())), round_mm(fr.length_to_mm(zr.y())));
+  });
+  return {name + "-envelope.ply", name + "-deviation.ply", name + "-tool.csv"};
+}
+
+}  // namespace flankcam::cli

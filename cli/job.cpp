@@ -1,0 +1,188 @@
+#include "cli/job.h"
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <regex>
+#include <set>
+
+#include "core/errors.h"
+
+namespace flankcam::cli {
+
+namespace {
+
+// Reads typed values out of the YAML tree; every failure names file, line and key path.
+class Reader {
+ public:
+  explicit Reader(std::string file) : file_(std::move(file)) {}
+
+  [[noreturn]] void fail(const YAML::Node& node, const std::string& key, const std::string& what) const {
+    const YAML::Mark m = node.Mark();
+    if (m.is_null()) throw InputError(fmt::format("{}: {}: {}", file_, key, what));
+    throw InputError(fmt::format("{}:{}: {}: {}", file_, m.line + 1, key, what));
+  }
+
+  void only_keys(const YAML::Node& map, const std::string& key, const std::set<std::string>& allowed) const {
+    if (!map.IsMap()) fail(map, key.empty() ? "job" : key, "expected a mapping of keys");
+    for (const auto& kv : map) {
+      const std::string k = kv.first.as<std::string>();
+      if (!allowed.count(k)) {
+        std::string known;
+        for (const auto& a : allowed) known += (known.empty() ? "" : ", ") + a;
+        fail(kv.first, key.empty() ? k : key + "." + k, "unknown key (known: " + known + ")");
+      }
+    }
+  }
+
+  double number(const YAML::Node& n, const std::string& key) const {
+    if (!n.IsScalar()) fail(n, key, "expected a number");
+    double v = 0;
+    try {
+      v = n.as<double>();
+    } catch (const YAML::Exception&) {
+      fail(n, key, "expected a number, got '" + n.Scalar() + "'");
+    }
+    if (!std::isfinite(v)) fail(n, key, "must be finite, got '" + n.Scalar() + "'");
+    return v;
+  }
+  double positive(const YAML::Node& n, const std::string& key) const {
+    const double v = number(n, key);
+    if (!(v > 0)) fail(n, key, "must be > 0");
+    return v;
+  }
+  double non_negative(const YAML::Node& n, const std::string& key) const {
+    const double v = number(n, key);
+    if (!(v >= 0)) fail(n, key, "must be >= 0");
+    return v;
+  }
+  int integer(const YAML::Node& n, const std::string& key, int lo, int hi) const {
+    const double v = number(n, key);
+    if (v != std::floor(v) || v < lo || v > hi) fail(n, key, fmt::format("expected a whole number in {}..{}", lo, hi));
+    return int(v);
+  }
+  std::string text(const YAML::Node& n, const std::string& key) const {
+    if (!n.IsScalar()) fail(n, key, "expected a string");
+    return n.Scalar();
+  }
+  std::array<double, 6> line(const YAML::Node& n, const std::string& key) const {
+    if (!n.IsSequence() || n.size() != 6) fail(n, key, "expected 6 numbers [ax, ay, az, bx, by, bz] (mm)");
+    std::array<double, 6> l{};
+    for (size_t k = 0; k < 6; ++k) l[k] = number(n[k], fmt::format("{}[{}]", key, k));
+    return l;
+  }
+
+ private:
+  std::string file_;
+};
+
+ToolShape read_shape(const Reader& r, const YAML::Node& n) {
+  const std::string s = r.text(n, "tool.shape");
+  if (s == "general") return ToolShape::General;
+  if (s == "cone") return ToolShape::Cone;
+  if (s == "cylinder") return ToolShape::Cylinder;
+  r.fail(n, "tool.shape", "unknown shape '" + s + "' (general, cone, cylinder)");
+}
+
+PatchJob read_patch(const Reader& r, const YAML::Node& p, const std::string& key, std::set<std::string>& names) {
+  r.only_keys(p, key, {"name", "init", "lines", "line", "rail", "length"});
+  PatchJob job;
+  if (!p["name"]) r.fail(p, key + ".name", "missing");
+  job.name = r.text(p["name"], key + ".name");
+  static const std::regex safe("[A-Za-z0-9_.-]+");
+  if (!std::regex_match(job.name, safe) || job.name.front() == '.')
+    r.fail(p["name"], key + ".name", "use letters, digits, '_', '-' and '.' only (it names the output files)");
+  if (!names.insert(job.name).second) r.fail(p["name"], key + ".name", "duplicate patch name '" + job.name + "'");
+  if (!p["init"]) r.fail(p, key + ".init", "missing (lines | line)");
+  const std::string init = r.text(p["init"], key + ".init");
+  if (init == "lines") {
+    job.init = PatchInit::Lines;
+    if (!p["lines"]) r.fail(p, key + ".lines", "missing: init: lines needs ordered axis positions");
+    if (p["line"]) r.fail(p["line"], key + ".line", "not used with init: lines (use lines:)");
+    const YAML::Node ls = p["lines"];
+    if (!ls.IsSequence() || ls.size() < 2) r.fail(ls, key + ".lines", "expected a list of at least 2 lines");
+    for (size_t k = 0; k < ls.size(); ++k) job.lines_mm.push_back(r.line(ls[k], fmt::format("{}.lines[{}]", key, k)));
+  } else if (init == "line") {
+    job.init = PatchInit::Line;
+    if (!p["line"]) r.fail(p, key + ".line", "missing: init: line needs one user line");
+    if (p["lines"]) r.fail(p["lines"], key + ".lines", "not used with init: line (use line:)");
+    if (p["rail"]) r.fail(p["rail"], key + ".rail", "only for init: lines");
+    if (p["length"]) r.fail(p["length"], key + ".length", "only for init: lines (the user line's length is kept)");
+    job.lines_mm.push_back(r.line(p["line"], key + ".line"));
+  } else {
+    r.fail(p["init"], key + ".init", "unknown initialisation '" + init + "' (lines, line)");
+  }
+  for (size_t k = 0; k < job.lines_mm.size(); ++k) {
+    const auto& l = job.lines_mm[k];
+    if (std::hypot(l[3] - l[0], l[4] - l[1], l[5] - l[2]) < 1e-6)
+      r.fail(job.init == PatchInit::Line ? p["line"] : p["lines"][k], key, "a line has zero length (a = b)");
+  }
+  if (p["rail"]) job.rail = r.integer(p["rail"], key + ".rail", 0, 1);
+  if (p["length"]) job.length_mm = r.positive(p["length"], key + ".length");
+  return job;
+}
+
+}  // namespace
+
+Job read_job(const std::filesystem::path& file) {
+  const std::string name = file.string();
+  if (!std::filesystem::is_regular_file(file)) throw InputError(name + ": job file not found");
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(name);
+  } catch (const YAML::ParserException& e) {
+    throw InputError(fmt::format("{}:{}: not valid YAML: {}", name, e.mark.line + 1, e.msg));
+  } catch (const YAML::Exception& e) {
+    throw InputError(name + ": cannot read: " + e.what());
+  }
+  const Reader r(name);
+  if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
+  r.only_keys(root, "", {"surface", "tool", "tolerance", "sampling", "weights", "fit", "patches"});
+
+  Job job;
+  job.file = file;
+  if (!root["surface"]) throw InputError(name + ": surface: missing (the design surface mesh, mm)");
+  const std::filesystem::path base = file.parent_path();
+  const std::filesystem::path surface = r.text(root["surface"], "surface");
+  job.surface = surface.is_absolute() ? surface : base / surface;
+  if (!std::filesystem::is_regular_file(job.surface))
+    r.fail(root["surface"], "surface", "file not found: " + job.surface.string());
+
+  if (const YAML::Node t = root["tool"]) {
+    r.only_keys(t, "tool", {"shape", "control_points"});
+    if (t["shape"]) job.fit.shape = read_shape(r, t["shape"]);
+    if (t["control_points"]) job.fit.meridian_control_points = r.integer(t["control_points"], "tool.control_points", 4, 100);
+  }
+  if (root["tolerance"]) job.tolerance_mm = r.positive(root["tolerance"], "tolerance");
+  if (const YAML::Node s = root["sampling"]) {
+    r.only_keys(s, "sampling", {"s", "t"});
+    if (s["s"]) job.fit.samples_s = r.integer(s["s"], "sampling.s", 4, 1000);
+    if (s["t"]) job.fit.samples_t = r.integer(s["t"], "sampling.t", 8, 100000);
+  }
+  if (const YAML::Node w = root["weights"]) {
+    r.only_keys(w, "weights", {"plane", "fair", "point", "rigid", "anchor"});
+    if (w["plane"]) job.fit.w_plane = r.non_negative(w["plane"], "weights.plane");
+    if (w["fair"]) job.fit.w_fair = r.non_negative(w["fair"], "weights.fair");
+    if (w["point"]) job.fit.w_point = r.non_negative(w["point"], "weights.point");
+    if (w["rigid"]) job.fit.w_rigid = r.non_negative(w["rigid"], "weights.rigid");
+    if (w["anchor"]) job.fit.w_anchor = r.non_negative(w["anchor"], "weights.anchor");
+  }
+  if (const YAML::Node f = root["fit"]) {
+    r.only_keys(f, "fit", {"iterations", "rail_control_points", "robust"});
+    if (f["iterations"]) job.fit.max_iterations = r.integer(f["iterations"], "fit.iterations", 1, 1000);
+    if (f["rail_control_points"])
+      job.fit.rail_control_points = r.integer(f["rail_control_points"], "fit.rail_control_points", 4, 1000);
+    if (f["robust"]) job.robust_mm = r.non_negative(f["robust"], "fit.robust");
+  }
+  if (auto err = job.fit.validate(); !err.empty()) throw InputError(name + ": " + err);
+
+  const YAML::Node ps = root["patches"];
+  if (!ps) throw InputError(name + ": patches: missing (at least one patch with its initialisation)");
+  if (!ps.IsSequence() || ps.size() == 0) r.fail(ps, "patches", "expected a list of at least one patch");
+  std::set<std::string> names;
+  for (size_t k = 0; k < ps.size(); ++k) job.patches.push_back(read_patch(r, ps[k], fmt::format("patches[{}]", k), names));
+  return job;
+}
+
+}  // namespace flankcam::cli

@@ -1,0 +1,37 @@
+// The job file (YAML): the design surface, the tool shape, the fitting options and the patches
+// with their initialisation lines, all in part coordinates and millimetres. Every error names the
+// file, the line and the key.
+#pragma once
+#include <array>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/fitting.h"
+#include "core/patch.h"
+
+namespace flankcam::cli {
+
+struct PatchJob {
+  std::string name;
+  PatchInit init = PatchInit::Lines;
+  std::vector<std::array<double, 6>> lines_mm;  // [ax, ay, az, bx, by, bz]; a is the tool-tip end
+  int rail = 0;
+  double length_mm = 0;  // <= 0: mean length of the lines
+};
+
+struct Job {
+  std::filesystem::path file;     // the job file itself
+  std::filesystem::path surface;  // resolved against the job file's folder
+  double tolerance_mm = 0.01;
+  std::optional<double> robust_mm;  // Cauchy scale of the fit; unset: FitOptions' relative default
+  FitOptions fit;                   // sampling, weights, shape, iterations (unit-free parts)
+  std::vector<PatchJob> patches;
+};
+
+// Throws InputError "FILE:LINE: KEY: what is wrong" for unknown keys, wrong types, bad values,
+// missing files.
+[[nodiscard]] Job read_job(const std::filesystem::path& file);
+
+}  // namespace flankcam::cli

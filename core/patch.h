@@ -1,0 +1,51 @@
+// One patch of a job, start to finish in the unit frame: initialisation (surface-driven from
+// ordered user lines, or line-driven from one line: exploration + propagation), the joint
+// optimisation, and the machined surface with its coverage.
+#pragma once
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/fitting.h"
+#include "core/machined_surface.h"
+#include "core/movability.h"
+
+namespace flankcam {
+
+enum class PatchInit { Lines, Line };
+[[nodiscard]] const char* to_string(PatchInit i);
+
+struct PatchSpec {
+  std::string name;
+  PatchInit init = PatchInit::Lines;
+  std::vector<AxisLine> lines;  // unit frame. Lines: >= 2 ordered axis positions; Line: exactly one
+  int rail = 0;                 // Lines: the rail (0: a, tool tip; 1: b) whose path is kept
+  double length = 0;            // Lines: rigid axis length (unit frame); <= 0: mean length of the lines
+};
+
+struct PatchOptions {
+  FitOptions fit;
+  ExplorationOptions exploration;
+  PropagationOptions propagation;
+  MachinedSurfaceOptions machined;
+  double tolerance = 1e-4;  // for coverage (unit frame)
+  // Stage messages ("exploring the line", ...) for progress output; may be empty.
+  std::function<void(const std::string&)> on_stage;
+};
+
+struct PatchFit {
+  Rails initial;
+  FitResult fit;
+  MachinedSurface machined;
+  double coverage = 0;                      // share of Φ's area within the tolerance
+  double seconds_init = 0, seconds_opt = 0;  // wall clock
+  std::optional<ExploredLine> explored;     // line-driven only
+  std::optional<LineTrajectory> trajectory;  // line-driven only
+};
+
+// Throws InputError naming the patch when its lines are unusable (too few, zero length,
+// a line that cannot be propagated, a motion that is not over the surface).
+[[nodiscard]] PatchFit fit_patch(const SurfaceIndex& surface, const PatchSpec& spec, const PatchOptions& options);
+
+}  // namespace flankcam

@@ -1,0 +1,167 @@
+#include <doctest/doctest.h>
+
+#include <fmt/format.h>
+
+#include <nlohmann/json.hpp>
+
+#include "core/closest_point.h"
+#include "tests/test_util.h"
+
+using namespace flankcam;
+
+namespace {
+// An exact cone envelope (s-curve motion) from `flankcam envelope`, and its truth.
+struct Generated {
+  std::string mesh;
+  nlohmann::json truth;
+};
+Generated generate(const test::ScratchDir& dir) {
+  REQUIRE(test::run_flankcam("envelope --profile cone --motion s-curve --grid-s 40 --grid-t 140 --out " + dir.file("env"), dir)
+              .code == 0);
+  return {dir.file("env/envelope.obj"), nlohmann::json::parse(test::read_text(dir.file("env/truth.json")))};
+}
+
+// The true axis at row i of truth.json, moved by `off` mm (both ends) as a YAML list.
+std::string line_at(const nlohmann::json& truth, size_t i, const Eigen::Vector3d& off) {
+  const auto& r = truth["axis"][i];
+  return fmt::format("[{}, {}, {}, {}, {}, {}]", double(r[0]) + off.x(), double(r[1]) + off.y(), double(r[2]) + off.z(),
+                     double(r[3]) + off.x(), double(r[4]) + off.y(), double(r[5]) + off.z());
+}
+
+std::string job_text(const Generated& g) {
+  const size_t n = g.truth["axis"].size();
+  return fmt::format(R"(# exact cone envelope, two patches
+surface: {}
+tool: {{shape: cone}}
+tolerance: 0.01
+sampling: {{s: 20, t: 80}}
+patches:
+  - name: surface-driven
+    init: lines
+    lines: [{}, {}, {}, {}, {}]
+  - name: line-driven
+    init: line
+    line: {}
+)",
+                     g.mesh, line_at(g.truth, 0, {0.6, -0.4, 0.3}), line_at(g.truth, n / 4, {-0.5, 0.5, 0}),
+                     line_at(g.truth, n / 2, {0.4, 0.3, -0.5}), line_at(g.truth, 3 * n / 4, {-0.3, -0.6, 0.2}),
+                     line_at(g.truth, n - 1, {0.5, 0.2, 0.4}), line_at(g.truth, n / 2, {0.5, -0.5, 0.3}));
+}
+}  // namespace
+
+TEST_CASE("flankcam fit: report in mm whose axis lies at the reported radii from the surface") {
+  test::ScratchDir dir("cli-fit");
+  const Generated g = generate(dir);
+  test::write_text(dir.file("job.yaml"), job_text(g));
+  const test::RunResult run = test::run_flankcam("fit " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
+  REQUIRE_MESSAGE(run.code == 0, run.err);
+  CHECK(run.err.find("iteration 1,") != std::string::npos);  // progress on stderr
+  const nlohmann::json report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const double diagonal = report["surface"]["diagonal_mm"];
+  const SurfaceIndex surface(load_mesh(g.mesh).mesh);
+  REQUIRE(report["patches"].size() == 2);
+  for (const auto& p : report["patches"]) {
+    const std::string name = p["name"];
+    CAPTURE(name);
+    const double eps = p["eps_opt"], eps_mm = p["eps_opt_mm"];
+    MESSAGE(name << ": eps " << eps << " (" << eps_mm << " mm), coverage " << double(p["coverage"]));
+    CHECK(eps <= 1e-4);
+    CHECK(double(p["eps_ini"]) > eps);
+    CHECK(eps_mm == doctest::Approx(eps * diagonal).epsilon(1e-3));
+    REQUIRE(p["axis"].size() == 80);
+    REQUIRE(p["radius"].size() == 20);
+    CHECK(double(p["coverage"]) > 0.5);
+    CHECK(double(p["coverage"]) <= 1.0);
+    // ε re-measured from the report alone: axis rows at t_i, radii at s_j = j / (n - 1).
+    double worst = 0;
+    const double L = p["tool"]["length"];
+    for (size_t i = 4; i + 4 < p["axis"].size(); i += 3) {
+      const auto& r = p["axis"][i];
+      const Eigen::Vector3d a(r[0], r[1], r[2]), b(r[3], r[4], r[5]);
+      CHECK((b - a).norm() == doctest::Approx(L).epsilon(2e-3));
+      for (size_t j = 2; j + 2 < p["radius"].size(); ++j) {
+        const double s = double(j) / 19.0;
+        const Footpoint f = surface.closest((1 - s) * a + s * b);
+        if (!f.on_boundary) worst = std::max(worst, std::abs(f.distance - double(p["radius"][j])));
+      }
+    }
+    CHECK(worst <= eps_mm + 1e-6);
+    // The profile is the tool of the radii: a cone's meridian is a line from r(0) towards r(L).
+    const auto& profile = p["tool"]["profile"];
+    REQUIRE(profile.size() > 10);
+    CHECK(std::string(p["tool"]["shape"]) == "cone");
+    // Spheres of radius d(z) along the axis touch a cone's meridian at r = d cos(half angle).
+    const double d0 = p["radius"][0], d1 = p["radius"][19];
+    CHECK(double(p["tool"]["diameter_max"]) == doctest::Approx(2 * d1 * std::cos(std::atan((d1 - d0) / L))).epsilon(1e-4));
+    CHECK(double(p["tool"]["cone_half_angle_deg"]) == doctest::Approx(std::atan((d1 - d0) / L) * 180 / M_PI).epsilon(1e-4));
+    for (const std::string f : p["files"]) CHECK(std::filesystem::file_size(dir.file("out/" + f)) > 100);
+    const std::string csv = test::read_text(dir.file("out/" + name + "-tool.csv"));
+    CHECK(csv.find("z_mm,r_mm\n") != std::string::npos);
+    const std::string ply = test::read_text(dir.file("out/" + name + "-deviation.ply"));
+    CHECK(ply.find(fmt::format("element vertex {}\n", surface.mesh().vertices.size())) != std::string::npos);
+    CHECK(ply.find("property double deviation_mm") != std::string::npos);
+  }
+  // The recovered cone matches the generator's (6 -> 9 mm) where the envelope pins it down.
+  const auto& sd = report["patches"][0]["radius"];
+  CHECK(double(sd[10]) == doctest::Approx(double(g.truth["radius"][20])).epsilon(0.15));
+}
+
+TEST_CASE("flankcam fit is deterministic: every file but the timings is byte-identical") {
+  test::ScratchDir dir("cli-fit-det");
+  const Generated g = generate(dir);
+  std::string job = job_text(g);
+  job = job.substr(0, job.find("  - name: line-driven"));  // one patch is enough here
+  test::write_text(dir.file("job.yaml"), job);
+  for (const char* out : {"one", "two"})
+    REQUIRE(test::run_flankcam("fit " + dir.file("job.yaml") + " --quiet --out " + dir.file(out), dir).code == 0);
+  for (const char* f : {"surface-driven-envelope.ply", "surface-driven-deviation.ply", "surface-driven-tool.csv"}) {
+    CAPTURE(f);
+    CHECK(test::read_text(dir.file(std::string("one/") + f)) == test::read_text(dir.file(std::string("two/") + f)));
+  }
+  auto r1 = nlohmann::json::parse(test::read_text(dir.file("one/report.json")));
+  auto r2 = nlohmann::json::parse(test::read_text(dir.file("two/report.json")));
+  r1["patches"][0].erase("seconds");
+  r2["patches"][0].erase("seconds");
+  CHECK(r1.dump() == r2.dump());
+}
+
+TEST_CASE("flankcam fit: job errors name the key and line, exit 2 and write nothing") {
+  test::ScratchDir dir("cli-fit-bad");
+  test::write_text(dir.file("s.obj"), "v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 2 3\n");
+  const std::string head = "surface: s.obj\n";
+  const std::string patch = "patches:\n  - name: p\n    init: line\n    line: [0, 0, 1, 0, 0, 9]\n";
+  struct Bad {
+    const char* what;
+    std::string text, expect;
+  };
+  const std::vector<Bad> cases = {
+      {"unknown key", head + "tool: {shape: cone, lenght: 3}\n" + patch, "job.yaml:2: tool.lenght: unknown key"},
+      {"unknown shape", head + "tool: {shape: ball}\n" + patch, "job.yaml:2: tool.shape: unknown shape 'ball'"},
+      {"wrong type", head + "tolerance: fine\n" + patch, "job.yaml:2: tolerance: expected a number, got 'fine'"},
+      {"negative", head + "tolerance: -1\n" + patch, "job.yaml:2: tolerance: must be > 0"},
+      {"nan", head + "patches:\n  - name: p\n    init: line\n    line: [0, 0, .nan, 0, 0, 9]\n",
+       "job.yaml:5: patches[0].line[2]: must be finite"},
+      {"five numbers", head + "patches:\n  - name: p\n    init: line\n    line: [0, 0, 0, 0, 9]\n",
+       "job.yaml:5: patches[0].line: expected 6 numbers"},
+      {"missing surface", "surface: nowhere.obj\n" + patch, "job.yaml:1: surface: file not found"},
+      {"no patches", head, "patches: missing"},
+      {"bad init", head + "patches:\n  - name: p\n    init: spiral\n", "job.yaml:4: patches[0].init: unknown initialisation"},
+      {"duplicate name", head + patch + "  - name: p\n    init: line\n    line: [0, 0, 1, 0, 0, 9]\n",
+       "job.yaml:6: patches[1].name: duplicate patch name 'p'"},
+      {"unsafe name", head + "patches:\n  - name: ../x\n    init: line\n    line: [0, 0, 1, 0, 0, 9]\n",
+       "patches[0].name: use letters"},
+      {"sampling", head + "sampling: {s: 2}\n" + patch, "job.yaml:2: sampling.s: expected a whole number in 4..1000"},
+      {"yaml syntax", head + "tool: {shape: cone\n" + patch, "job.yaml:"},
+  };
+  for (const auto& c : cases) {
+    CAPTURE(c.what);
+    test::write_text(dir.file("job.yaml"), c.text);
+    const test::RunResult r = test::run_flankcam("fit " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
+    CAPTURE(r.err);
+    CHECK(r.code == 2);
+    CHECK(r.err.find(c.expect) != std::string::npos);
+    CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);  // one line
+    CHECK_FALSE(std::filesystem::exists(dir.file("out/report.json")));
+  }
+  CHECK(test::run_flankcam("fit " + dir.file("absent.yaml") + " --out " + dir.file("out"), dir).code == 2);
+}
