@@ -494,7 +494,7 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
       problem.AddResidualBlock(new LinearResidual({C}, target), nullptr, D.data());
     }
     ceres::Solver::Options so;
-    so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+    so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
     so.max_num_iterations = o.solver_iterations;
     so.num_threads = o.threads;
     so.logging_type = ceres::SILENT;

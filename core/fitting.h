@@ -34,11 +34,13 @@ struct FitOptions {
   int meridian_control_points = 10;  // general tools: cubic spline d(s) (paper: 10)
   int max_iterations = 25;           // outer iterations (footpoints recomputed between solves)
   int solver_iterations = 5;         // Levenberg-Marquardt iterations per outer iteration
-  double stall = 1e-2;               // stop when a round lowers its objective by less than this, relatively
-  // Scale of a Cauchy loss on the sample residuals (unit frame; not in the paper): samples whose
-  // distance error is well above it (a local bump, a fillet, a damaged scan) stop pulling the motion.
-  // 0: plain least squares as in the paper. Exact-envelope fits are unchanged by it (tests).
-  double robust_scale = 1e-4;
+  double stall = 2e-2;               // stop when a round lowers its objective by less than this, relatively
+  // Scale of a Cauchy loss on the sample residuals (unit frame; not in the paper). Samples whose
+  // distance error is well above it (a local bump, a damaged scan) stop pulling the motion, so the
+  // fit stays on the rest. The price is a larger worst error where the surface is simply not an
+  // envelope: on rotor 37 a scale of 1e-3 raised the worst overcut from 0.11 to 0.15 mm (1e-4: 0.43 mm)
+  // while coverage rose from 61% to 62% (72%). 0: plain least squares, as in the paper.
+  double robust_scale = 0;
   int threads = 2;
   // Called after each outer iteration with its number (1-based) and F_motion; may be empty.
   std::function<void(int iteration, double objective)> on_iteration;
