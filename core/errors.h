@@ -11,4 +11,9 @@ struct InputError : std::runtime_error {
   using std::runtime_error::runtime_error;
 };
 
+// A machine definition that cannot describe a machine (names the file and field).
+struct MachineError : InputError {
+  using InputError::InputError;
+};
+
 }  // namespace flankcam

@@ -1,0 +1,59 @@
+// Forward and inverse kinematics of a Machine (one solver for every chain).
+//
+// Frames: the part (work) frame is the machine frame at zero rotary angles. A pose is the tool tip
+// and the unit tool axis (tip -> spindle) in part coordinates. The linear joints X, Y, Z are the
+// controlled point: the tool tip at zero head angles with tool-length compensation, i.e. the head's
+// pivot point less (gauge length + tool length) along the spindle direction. Rotary joints are in
+// degrees, in the Machine's rotary order.
+#pragma once
+#include <Eigen/Core>
+#include <array>
+#include <vector>
+
+#include "kinematics/machine.h"
+
+namespace flankcam {
+
+struct ToolPose {
+  Eigen::Vector3d tip = Eigen::Vector3d::Zero();       // mm, part frame
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();     // unit, tip -> spindle, part frame
+};
+
+struct Joints {
+  Eigen::Vector3d linear = Eigen::Vector3d::Zero();  // X, Y, Z, mm
+  std::array<double, 2> rotary{0, 0};                // degrees, Machine::rotary order
+};
+
+// Joints -> pose. `tool_length_mm`: spindle nose to tip (matters for head axes only).
+[[nodiscard]] ToolPose forward(const Machine& m, const Joints& q, double tool_length_mm);
+
+// The rotary angles that point the tool along `axis_part`: the two-rotation problem
+// R(ω1, α) R(ω2, β) v = w, both branches. `free[k]`: the pose is singular for angle k (the tool axis
+// is along the primary rotary axis), any value of it works; it is returned as 0.
+struct RotarySolution {
+  std::array<double, 2> deg{0, 0};  // in (-180, 180]
+  std::array<bool, 2> free{false, false};
+};
+[[nodiscard]] std::vector<RotarySolution> rotary_solutions(const Machine& m, const Eigen::Vector3d& axis_part);
+
+// Angle (deg) between the pose and the nearest singular orientation, where one rotary angle is free
+// (e.g. the tool axis along the C axis of an A/C table). Near it the free angle swings fast.
+[[nodiscard]] double singularity_angle_deg(const Machine& m, const Eigen::Vector3d& axis_part);
+
+// The linear joints for a pose once the rotary angles are chosen.
+[[nodiscard]] Eigen::Vector3d linear_joints(const Machine& m, const ToolPose& pose, const std::array<double, 2>& rotary_deg,
+                                            double tool_length_mm);
+
+// Every joint solution of a pose (0, 1 or 2; limits not applied, free angles at 0).
+[[nodiscard]] std::vector<Joints> inverse(const Machine& m, const ToolPose& pose, double tool_length_mm);
+
+// The general two-rotation problem R(ω1, α) R(ω2, β) v = w for unit vectors (ω1 not parallel to ω2):
+// 0, 1 or 2 solutions (α, β) in radians; free flags as in RotarySolution.
+struct TwoRotations {
+  double alpha = 0, beta = 0;
+  bool alpha_free = false, beta_free = false;
+};
+[[nodiscard]] std::vector<TwoRotations> solve_two_rotations(const Eigen::Vector3d& w1, const Eigen::Vector3d& w2,
+                                                            const Eigen::Vector3d& v, const Eigen::Vector3d& w);
+
+}  // namespace flankcam

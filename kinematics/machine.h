@@ -1,0 +1,62 @@
+// A 5-axis machine as data: three linear axes and two rotary axes, each rotary axis carrying
+// either the table (it turns the part) or the head (it turns the tool), plus controller facts.
+// Read from machines/*.yaml; every number a user writes is in mm, degrees, mm/min and deg/min.
+#pragma once
+#include <Eigen/Core>
+#include <array>
+#include <string>
+#include <vector>
+
+namespace flankcam {
+
+enum class Carrier { Table, Head };
+
+struct RotaryAxis {
+  std::string name;                                   // A, B or C
+  Carrier carries = Carrier::Table;
+  // A positive angle turns the carried body (part or tool) right-handed about this unit direction.
+  // ISO tables turn the other way round from heads, so an ISO A table has direction -X.
+  Eigen::Vector3d direction = Eigen::Vector3d::UnitZ();
+  // A point on the rotation axis at zero angles: tables in part (work) coordinates; heads
+  // relative to the head's pivot point (gauge_length above the spindle nose), usually 0.
+  Eigen::Vector3d pivot = Eigen::Vector3d::Zero();
+  bool continuous = false;                            // no limits, values are unwound (may exceed ±360)
+  double min_deg = -360, max_deg = 360;
+  double max_speed_deg_min = 3600;
+};
+
+struct LinearAxis {
+  std::string name;  // X, Y, Z
+  double min_mm = -1e9, max_mm = 1e9;
+  double max_speed_mm_min = 10000;
+};
+
+struct Controller {
+  bool tcp = false;             // G43.4 / TRAORI / M128: the controller takes tip + angles
+  std::string dialect = "iso";  // iso | linuxcnc | heidenhain | sinumerik
+  bool inverse_time = true;     // G93 for simultaneous moves
+  bool linuxcnc_trt = false;    // LinuxCNC with trt kinematics active: programs give tip + angles
+};
+
+struct Machine {
+  std::string name, description;
+  std::string file;  // where it came from (for messages)
+  std::array<LinearAxis, 3> linear;
+  // In chain order from the machine base outward: tables from the bed to the part, heads from the
+  // ram to the spindle. Joint values keep this order.
+  std::array<RotaryAxis, 2> rotary;
+  Eigen::Vector3d spindle_direction = Eigen::Vector3d::UnitZ();  // tool axis (tip -> spindle) at zero angles
+  double gauge_length_mm = 0;  // head's pivot point to the spindle nose, along the spindle
+  Controller controller;
+
+  [[nodiscard]] std::string kind() const;  // "table-table", "head-table" or "head-head"
+  [[nodiscard]] int tables() const;
+};
+
+// Reads and validates a machine file. Throws MachineError "FILE: FIELD: what" for a missing
+// field, a zero direction, limits in the wrong order, parallel rotary axes, and the like.
+[[nodiscard]] Machine load_machine(const std::string& path);
+// Checks a machine built in code; throws MachineError naming the field.
+void validate(const Machine& m);
+
+}  // namespace flankcam

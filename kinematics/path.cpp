@@ -1,0 +1,344 @@
+#include "kinematics/path.h"
+
+#include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
+#include <fmt/format.h>
+#include <limits>
+#include <optional>
+
+#include "core/errors.h"
+
+namespace flankcam {
+
+std::string PathOptions::validate() const {
+  if (!(tool_length_mm >= 0) || !std::isfinite(tool_length_mm)) return "tool_length_mm: must be >= 0";
+  if (!(tolerance_mm > 0)) return "tolerance_mm: must be > 0";
+  if (!(angle_tolerance_deg > 0)) return "angle_tolerance_deg: must be > 0";
+  if (checks_per_block < 1) return "checks_per_block: at least 1";
+  if (max_depth < 0) return "max_depth: must be >= 0";
+  return {};
+}
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kDeg = M_PI / 180;
+
+ToolPose lerp_pose(const ToolPose& p, const ToolPose& q, double f) {
+  ToolPose r;
+  r.tip = (1 - f) * p.tip + f * q.tip;
+  const Eigen::Quaterniond full = Eigen::Quaterniond::FromTwoVectors(p.axis, q.axis);
+  r.axis = Eigen::Quaterniond::Identity().slerp(f, full) * p.axis;
+  return r;
+}
+
+// A candidate joint solution at one pose: angles (NaN = free) and IK branch.
+struct Candidate {
+  std::array<double, 2> deg;
+  int branch;
+  int linear_ok = -1;  // 1/0: the linear joints are within limits (unwinding does not change them); -1: a free angle, check later
+  std::string why;     // when linear_ok == 0
+};
+
+// The value of angle `k` for candidate `c` nearest to `prev` that the axis allows (NaN if none).
+double resolve(const RotaryAxis& a, double deg, double prev) {
+  if (std::isnan(deg)) deg = prev;  // free: hold
+  if (a.continuous) return deg + 360.0 * std::round((prev - deg) / 360.0);
+  double best = NAN;
+  for (int turn = -3; turn <= 3; ++turn) {
+    const double v = deg + 360.0 * turn;
+    if (v < a.min_deg - 1e-9 || v > a.max_deg + 1e-9) continue;
+    if (std::isnan(best) || std::abs(v - prev) < std::abs(best - prev)) best = v;
+  }
+  return best;
+}
+
+// At most two of anything per pose (two IK branches): no heap allocation per pose.
+template <class T>
+struct Two {
+  std::array<T, 2> items{};
+  size_t count = 0;
+  [[nodiscard]] size_t size() const { return count; }
+  [[nodiscard]] bool empty() const { return count == 0; }
+  void push_back(T x) { items[count++] = std::move(x); }
+  void assign(size_t k, const T& x) {
+    count = k;
+    for (size_t j = 0; j < k; ++j) items[j] = x;
+  }
+  T& operator[](size_t k) { return items[k]; }
+  const T& operator[](size_t k) const { return items[k]; }
+  [[nodiscard]] auto begin() const { return items.begin(); }
+  [[nodiscard]] auto end() const { return items.begin() + long(count); }
+};
+
+bool linear_ok(const Machine& m, const Eigen::Vector3d& x, std::string* why) {
+  for (int k = 0; k < 3; ++k)
+    if (x[k] < m.linear[k].min_mm - 1e-9 || x[k] > m.linear[k].max_mm + 1e-9) {
+      if (why)
+        *why = fmt::format("{} = {:.3f} mm is outside its limits [{}, {}]", m.linear[k].name, x[k],
+                           m.linear[k].min_mm, m.linear[k].max_mm);
+      return false;
+    }
+  return true;
+}
+
+bool near_singular(const Machine& m, const Eigen::Vector3d& axis, double singular_deg) {
+  return singularity_angle_deg(m, axis) < singular_deg;
+}
+
+}  // namespace
+
+JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::vector<double> t, const PathOptions& o,
+                     const IntendedMotion& motion) {
+  if (auto err = o.validate(); !err.empty()) throw InputError("path options: " + err);
+  const int n = int(poses.size());
+  if (t.empty())
+    for (int i = 0; i < n; ++i) t.push_back(i);
+  if (int(t.size()) != n) throw InputError("solve_path: one parameter per pose");
+  JointPath out;
+  if (n == 0) return out;
+
+  // Candidates per pose within the rotary limits (any turn), independent of the predecessor.
+  std::vector<Two<Candidate>> cand(static_cast<size_t>(n));
+  std::vector<char> singular(static_cast<size_t>(n), 0);
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    for (const RotarySolution& s : rotary_solutions(m, poses[i].axis)) {
+      Candidate c{s.deg, int(cand[i].size()), -1, {}};
+      for (int k = 0; k < 2; ++k)
+        if (s.free[k]) c.deg[k] = NAN, singular[i] = 1;
+      if (!s.free[0] && !s.free[1])
+        c.linear_ok = linear_ok(m, linear_joints(m, poses[i], s.deg, o.tool_length_mm), &c.why) ? 1 : 0;
+      cand[i].push_back(std::move(c));
+    }
+    if (near_singular(m, poses[i].axis, o.singular_deg)) singular[i] = 1;
+  }
+  for (int i = 0; i < n; ++i) {
+    if (cand[i].empty()) {
+      out.reachable = false;
+      out.failed_pose = i;
+      out.why = "the tool axis is beyond the tilt range of the rotary axes";
+      return out;
+    }
+  }
+
+  // Viterbi over candidates: cost = rotary travel in minutes at the axes' maximum speeds.
+  struct State {
+    double cost = kInf;
+    std::array<double, 2> deg{0, 0};
+    int from = -1;
+  };
+  std::vector<Two<State>> st(static_cast<size_t>(n));
+  std::string why;
+  for (int i = 0; i < n; ++i) {
+    st[i].assign(cand[i].size(), State{});
+    for (size_t c = 0; c < cand[i].size(); ++c) {
+      const Candidate& cd = cand[i][c];
+      const size_t preds = i == 0 ? 1 : st[i - 1].size();
+      for (size_t p = 0; p < preds; ++p) {
+        double base = 0;
+        std::array<double, 2> prev{0, 0};
+        if (i > 0) {
+          base = st[i - 1][p].cost;
+          if (!std::isfinite(base)) continue;
+          prev = st[i - 1][p].deg;
+        } else {
+          // Start as close to zero as the limits allow (free angles start at 0).
+          for (int k = 0; k < 2; ++k)
+            prev[k] = std::isnan(cd.deg[k]) ? 0 : std::clamp(0.0, m.rotary[k].min_deg, m.rotary[k].max_deg);
+        }
+        std::array<double, 2> deg{};
+        bool ok = true;
+        double cost = base;
+        for (int k = 0; k < 2 && ok; ++k) {
+          const RotaryAxis& a = m.rotary[k];
+          deg[k] = resolve(a, cd.deg[k], prev[k]);
+          if (std::isnan(deg[k])) {
+            ok = false;
+            why = fmt::format("rotary axis {} would need {:.3f} deg, outside its limits [{}, {}]", a.name,
+                              cd.deg[k], a.min_deg, a.max_deg);
+            break;
+          }
+          if (i > 0) cost += std::abs(deg[k] - prev[k]) / a.max_speed_deg_min;
+        }
+        if (!ok) continue;
+        if (cd.linear_ok == 0) {
+          why = cd.why;
+          continue;
+        }
+        if (cd.linear_ok < 0 && !linear_ok(m, linear_joints(m, poses[i], deg, o.tool_length_mm), &why)) continue;
+        if (cost < st[i][c].cost) st[i][c] = {cost, deg, int(p)};
+      }
+    }
+    if (std::none_of(st[i].begin(), st[i].end(), [](const State& s) { return std::isfinite(s.cost); })) {
+      out.reachable = false;
+      out.failed_pose = i;
+      out.why = why.empty() ? "no joint solution within the limits" : why;
+      return out;
+    }
+  }
+  // Backtrack.
+  std::vector<int> pick(static_cast<size_t>(n));
+  {
+    int best = 0;
+    for (size_t c = 1; c < st[n - 1].size(); ++c)
+      if (st[n - 1][c].cost < st[n - 1][best].cost) best = int(c);
+    for (int i = n - 1; i >= 0; --i) {
+      pick[i] = best;
+      best = st[i][best].from;
+    }
+  }
+  std::vector<Joints> q(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) q[i].rotary = st[i][size_t(pick[i])].deg;
+  // Free angles: interpolate across each singular run between its defined neighbours.
+  for (int k = 0; k < 2; ++k) {
+    for (int i = 0; i < n;) {
+      if (!std::isnan(cand[i][size_t(pick[i])].deg[k])) {
+        ++i;
+        continue;
+      }
+      int j = i;
+      while (j < n && std::isnan(cand[j][size_t(pick[j])].deg[k])) ++j;
+      const bool has_before = i > 0, has_after = j < n;
+      for (int r = i; r < j; ++r) {
+        double v = q[r].rotary[k];
+        if (has_before && has_after) {
+          const double f = (t[r] - t[i - 1]) / (t[j] - t[i - 1]);
+          v = (1 - f) * q[i - 1].rotary[k] + f * q[j].rotary[k];
+        } else if (has_after) {
+          v = q[j].rotary[k];
+        }
+        q[r].rotary[k] = v;
+      }
+      i = j;
+    }
+  }
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) q[i].linear = linear_joints(m, poses[i], q[i].rotary, o.tool_length_mm);
+  for (int i = 0; i < n; ++i) {
+    if (i > 0 && cand[i].size() > 1 && cand[i - 1].size() > 1 && !singular[i] &&
+        !singular[i - 1] && pick[i] != pick[i - 1])
+      ++out.branch_changes;
+  }
+
+  // Linearisation by recursive bisection of each block.
+  const auto intended = [&](int i0, double tt) {
+    if (motion) return motion(tt);
+    const double f = (tt - t[i0]) / (t[i0 + 1] - t[i0]);
+    return lerp_pose(poses[i0], poses[i0 + 1], f);
+  };
+  // The checks sample each block at a few points; the error between them peaks a few percent higher
+  // (measured up to 4%), so the blocks are held to 90% of the tolerance.
+  const double tip_tol = 0.9 * o.tolerance_mm, cos_tol = std::cos(0.9 * o.angle_tolerance_deg * kDeg);
+  // Nearest solution of an inserted pose to the joints before it (same unwinding).
+  const auto nearest = [&](const ToolPose& p, const Joints& near) -> std::optional<Joints> {
+    std::optional<Joints> best;
+    double best_d = kInf;
+    for (const RotarySolution& s : rotary_solutions(m, p.axis)) {
+      Joints j;
+      double d = 0;
+      bool ok = true;
+      for (int k = 0; k < 2; ++k) {
+        const double v = s.free[k] ? near.rotary[k] : resolve(m.rotary[k], s.deg[k], near.rotary[k]);
+        if (std::isnan(v)) ok = false;
+        j.rotary[k] = v;
+        d += std::abs(v - near.rotary[k]);
+      }
+      if (!ok || d >= best_d) continue;
+      j.linear = linear_joints(m, p, j.rotary, o.tool_length_mm);
+      if (!linear_ok(m, j.linear, nullptr)) continue;
+      best_d = d;
+      best = j;
+    }
+    return best;
+  };
+  struct Node {
+    double t;
+    ToolPose pose;
+    Joints q;
+  };
+  // Inserted poses go to `acc` in order; `unresolved` counts sub-blocks left off tolerance.
+  std::function<void(int, const Node&, const Node&, int, std::vector<Node>&, int&)> split =
+      [&](int i0, const Node& a, const Node& b, int depth, std::vector<Node>& acc, int& unresolved) {
+        bool off = false;
+        for (int s = 1; s <= o.checks_per_block && !off; ++s) {
+          const double f = double(s) / (o.checks_per_block + 1);
+          Joints qi;
+          qi.linear = (1 - f) * a.q.linear + f * b.q.linear;
+          for (int k = 0; k < 2; ++k) qi.rotary[k] = (1 - f) * a.q.rotary[k] + f * b.q.rotary[k];
+          const ToolPose got = forward(m, qi, o.tool_length_mm);
+          const ToolPose want = intended(i0, (1 - f) * a.t + f * b.t);
+          off = (got.tip - want.tip).norm() > tip_tol || got.axis.dot(want.axis) < cos_tol;
+        }
+        if (!off) return;
+        if (depth >= o.max_depth) {
+          ++unresolved;
+          return;
+        }
+        const double tm = 0.5 * (a.t + b.t);
+        const ToolPose pm = intended(i0, tm);
+        const std::optional<Joints> qm = nearest(pm, a.q);
+        if (!qm) {
+          ++unresolved;
+          return;
+        }
+        const Node mid{tm, pm, *qm};
+        split(i0, a, mid, depth + 1, acc, unresolved);
+        acc.push_back(mid);
+        split(i0, mid, b, depth + 1, acc, unresolved);
+      };
+  // Blocks are independent: split them in parallel, merge in order (deterministic).
+  std::vector<std::vector<Node>> inserted(static_cast<size_t>(n));
+  std::vector<int> unresolved(static_cast<size_t>(n), 0);
+#pragma omp parallel for schedule(dynamic, 256)
+  for (int i = 1; i < n; ++i)
+    split(i - 1, {t[i - 1], poses[i - 1], q[i - 1]}, {t[i], poses[i], q[i]}, 0, inserted[i], unresolved[i]);
+  size_t total = size_t(n);
+  for (const auto& v : inserted) total += v.size();
+  out.poses.reserve(total), out.t.reserve(total), out.joints.reserve(total), out.input_index.reserve(total);
+  for (int i = 0; i < n; ++i) {
+    out.unresolved_blocks += unresolved[i];
+    if (i > 0) {
+      for (const Node& nd : inserted[i]) {
+        out.poses.push_back(nd.pose);
+        out.t.push_back(nd.t);
+        out.joints.push_back(nd.q);
+        out.input_index.push_back(-1);
+        if (near_singular(m, nd.pose.axis, o.singular_deg)) out.singular.push_back(int(out.poses.size()) - 1);
+        ++out.inserted;
+      }
+    }
+    out.poses.push_back(poses[i]);
+    out.t.push_back(t[i]);
+    out.joints.push_back(q[i]);
+    out.input_index.push_back(i);
+    if (singular[i]) out.singular.push_back(int(out.poses.size()) - 1);
+  }
+  return out;
+}
+
+std::vector<BlockFeed> block_feeds(const Machine& m, const JointPath& path, double feed) {
+  if (!(feed > 0)) throw InputError("feed: must be > 0 mm/min");
+  std::vector<BlockFeed> out(path.joints.size());
+  for (size_t i = 1; i < path.joints.size(); ++i) {
+    const Joints &a = path.joints[i - 1], &b = path.joints[i];
+    BlockFeed& bf = out[i];
+    const double dist = (path.poses[i].tip - path.poses[i - 1].tip).norm();
+    bf.minutes = dist / feed;
+    for (int k = 0; k < 3; ++k) {
+      const double need = std::abs(b.linear[k] - a.linear[k]) / m.linear[k].max_speed_mm_min;
+      if (need > bf.minutes) bf.minutes = need, bf.limiting_axis = k;
+    }
+    for (int k = 0; k < 2; ++k) {
+      const double need = std::abs(b.rotary[k] - a.rotary[k]) / m.rotary[k].max_speed_deg_min;
+      if (need > bf.minutes) bf.minutes = need, bf.limiting_axis = 3 + k;
+    }
+    if (!(bf.minutes > 0)) bf.minutes = 1e-6;  // a zero-length block: keep F finite
+    bf.inverse_time = 1 / bf.minutes;
+    bf.tip_feed_mm_min = dist / bf.minutes;
+  }
+  return out;
+}
+
+}  // namespace flankcam

@@ -1,0 +1,185 @@
+#include "kinematics/path.h"
+
+#include <doctest/doctest.h>
+
+#include <Eigen/Geometry>
+
+using namespace flankcam;
+
+namespace {
+Machine shipped(const std::string& name) { return load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/" + name + ".yaml"); }
+
+Eigen::Vector3d tilted(double tilt_deg, double azimuth_deg) {
+  const double t = tilt_deg * M_PI / 180, a = azimuth_deg * M_PI / 180;
+  return {std::sin(t) * std::cos(a), std::sin(t) * std::sin(a), std::cos(t)};
+}
+
+double max_jump(const JointPath& p, int axis) {
+  double worst = 0;
+  for (size_t i = 1; i < p.joints.size(); ++i)
+    worst = std::max(worst, std::abs(p.joints[i].rotary[size_t(axis)] - p.joints[i - 1].rotary[size_t(axis)]));
+  return worst;
+}
+
+void check_reproduces(const Machine& m, const JointPath& p, double tool) {
+  for (size_t i = 0; i < p.joints.size(); ++i) {
+    const ToolPose back = forward(m, p.joints[i], tool);
+    CHECK((back.tip - p.poses[i].tip).norm() < 1e-9);
+    CHECK((back.axis - p.poses[i].axis).norm() < 1e-9);
+  }
+}
+}  // namespace
+
+TEST_CASE("a continuous C axis is unwound over three turns: no 360 degree jumps, values beyond 360") {
+  const Machine m = shipped("xyzac-trt");
+  std::vector<ToolPose> poses;
+  for (int i = 0; i <= 360; ++i) poses.push_back({Eigen::Vector3d(50 * std::cos(i * M_PI / 60), 50 * std::sin(i * M_PI / 60), 10), tilted(30, 3.0 * i)});
+  PathOptions o;
+  o.tool_length_mm = 80;
+  const JointPath p = solve_path(m, poses, {}, o);
+  REQUIRE(p.reachable);
+  CHECK(p.branch_changes == 0);
+  const int c = m.rotary[0].name == "C" ? 0 : 1;
+  const double travel = p.joints.back().rotary[size_t(c)] - p.joints.front().rotary[size_t(c)];
+  MESSAGE("C travel " << travel << " deg, largest step " << max_jump(p, c));
+  CHECK(std::abs(travel) == doctest::Approx(1080).epsilon(1e-9));
+  CHECK(max_jump(p, c) < 3.5);
+  for (size_t i = 0; i < p.joints.size(); ++i)  // A holds the tilt at the input poses (slerp between them tilts less)
+    if (p.input_index[i] >= 0) CHECK(std::abs(p.joints[i].rotary[size_t(1 - c)] - p.joints[0].rotary[size_t(1 - c)]) < 1e-9);
+  check_reproduces(m, p, o.tool_length_mm);
+}
+
+TEST_CASE("the IK branch is chosen per path: one branch covers the sweep, so it never flips") {
+  for (const std::string name : {"xyzbc-trt", "xyzbc-head-table", "xyzca-head-head", "xyzbc-nutating"}) {
+    CAPTURE(name);
+    const Machine m = shipped(name);
+    std::vector<ToolPose> poses;
+    for (int i = 0; i <= 200; ++i) poses.push_back({Eigen::Vector3d(-60 + 0.6 * i, 20, 5), tilted(25 + 15 * std::sin(i * 0.05), 40 + 0.4 * i)});
+    PathOptions o;
+    o.tool_length_mm = 60;
+    const JointPath p = solve_path(m, poses, {}, o);
+    REQUIRE(p.reachable);
+    CHECK(p.branch_changes == 0);
+    CHECK(max_jump(p, 0) < 10);
+    CHECK(max_jump(p, 1) < 10);
+    check_reproduces(m, p, o.tool_length_mm);
+  }
+}
+
+TEST_CASE("through the singular pose the free angle stays continuous and the pose is reported") {
+  const Machine m = shipped("xyzac-trt");
+  // The tool axis swings through the vertical (C free there) in the plane at azimuth 30 degrees.
+  std::vector<ToolPose> poses;
+  for (int i = -50; i <= 50; ++i) poses.push_back({Eigen::Vector3d(i, 0, 0), tilted(0.4 * i, 30)});
+  PathOptions o;
+  o.tool_length_mm = 50;
+  const JointPath p = solve_path(m, poses, {}, o);
+  REQUIRE(p.reachable);
+  CHECK(!p.singular.empty());
+  const int c = m.rotary[0].name == "C" ? 0 : 1;
+  MESSAGE("largest C step " << max_jump(p, c) << ", largest A step " << max_jump(p, 1 - c) << ", singular poses "
+                            << p.singular.size());
+  CHECK(max_jump(p, c) < 1e-6);  // the plane of the swing does not turn: C holds
+  CHECK(max_jump(p, 1 - c) < 0.5);
+  check_reproduces(m, p, o.tool_length_mm);
+}
+
+TEST_CASE("out of reach: a tilt beyond the A limits names the pose and the axis") {
+  const Machine m = shipped("xyzac-trt");  // A in [-120, 30]: the tool tilts up to 120 deg one way, 30 the other
+  std::vector<ToolPose> poses;
+  for (int i = 0; i <= 20; ++i) poses.push_back({Eigen::Vector3d::Zero(), tilted(5.0 * i, 0)});
+  poses.push_back({Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 0, -1)});  // pointing up from below: A = 180
+  const JointPath p = solve_path(m, poses, {}, {});
+  CHECK_FALSE(p.reachable);
+  CHECK(p.failed_pose == 21);
+  CHECK(p.why.find("rotary axis A") != std::string::npos);
+
+  std::vector<ToolPose> far = {{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d::UnitZ()}, {Eigen::Vector3d(900, 0, 0), Eigen::Vector3d::UnitZ()}};
+  const JointPath q = solve_path(m, far, {}, {});
+  CHECK_FALSE(q.reachable);
+  CHECK(q.failed_pose == 1);
+  CHECK(q.why.find("X = 900") != std::string::npos);
+}
+
+TEST_CASE("linearisation keeps every intermediate tip within the tolerance through large rotary moves") {
+  for (const std::string name : {"xyzac-trt", "xyzbc-head-table", "xyzca-head-head", "xyzbc-nutating"}) {
+    CAPTURE(name);
+    const Machine m = shipped(name);
+    // 8 poses only: tilt 0 -> 28 deg while the azimuth turns 150 deg, tip on a line 100 mm off the pivots.
+    const IntendedMotion motion = [](double t) {
+      return ToolPose{Eigen::Vector3d(100 + 40 * t, -30 + 60 * t, 20), tilted(1 + 27 * t, 150 * t)};
+    };
+    std::vector<ToolPose> poses;
+    std::vector<double> ts;
+    for (int i = 0; i <= 7; ++i) ts.push_back(i / 7.0), poses.push_back(motion(i / 7.0));
+    PathOptions o;
+    o.tool_length_mm = 70;
+    o.tolerance_mm = 0.005;
+    const JointPath p = solve_path(m, poses, ts, o, motion);
+    REQUIRE(p.reachable);
+    CHECK(p.unresolved_blocks == 0);
+    CHECK(p.inserted > 20);
+    double worst = 0, worst_angle = 0;
+    for (size_t i = 1; i < p.joints.size(); ++i)
+      for (int s = 1; s < 40; ++s) {  // far finer than the linearisation's own checks
+        const double f = s / 40.0;
+        Joints q;
+        q.linear = (1 - f) * p.joints[i - 1].linear + f * p.joints[i].linear;
+        for (int k = 0; k < 2; ++k) q.rotary[size_t(k)] = (1 - f) * p.joints[i - 1].rotary[size_t(k)] + f * p.joints[i].rotary[size_t(k)];
+        const ToolPose got = forward(m, q, o.tool_length_mm), want = motion((1 - f) * p.t[i - 1] + f * p.t[i]);
+        worst = std::max(worst, (got.tip - want.tip).norm());
+        worst_angle = std::max(worst_angle, std::acos(std::min(1.0, got.axis.dot(want.axis))) * 180 / M_PI);
+      }
+    MESSAGE(name << ": " << p.inserted << " poses inserted, worst tip error " << worst << " mm, axis " << worst_angle << " deg");
+    CHECK(worst <= o.tolerance_mm);
+    CHECK(worst_angle <= o.angle_tolerance_deg);
+    check_reproduces(m, p, o.tool_length_mm);
+  }
+}
+
+TEST_CASE("inverse-time feed: the programmed tip feed unless an axis would exceed its maximum speed") {
+  const Machine m = shipped("xyzac-trt");
+  std::vector<ToolPose> poses = {{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d::UnitZ()},
+                                 {Eigen::Vector3d(10, 0, 0), Eigen::Vector3d::UnitZ()},
+                                 {Eigen::Vector3d(10.1, 0, 0), tilted(30, 90)}};
+  PathOptions o;
+  o.tolerance_mm = 1e3;  // no linearisation here
+  o.angle_tolerance_deg = 90;
+  const JointPath p = solve_path(m, poses, {}, o);
+  REQUIRE(p.joints.size() == 3);
+  const auto feeds = block_feeds(m, p, 1000);
+  CHECK(feeds[1].minutes == doctest::Approx(10.0 / 1000));
+  CHECK(feeds[1].limiting_axis == -1);
+  CHECK(feeds[1].inverse_time == doctest::Approx(100));
+  // 30 deg of A at 5400 deg/min takes 1/180 min, far longer than 0.1 mm at 1000 mm/min.
+  const int a = m.rotary[0].name == "A" ? 0 : 1;
+  CHECK(feeds[2].limiting_axis == 3 + a);
+  CHECK(feeds[2].minutes == doctest::Approx(30.0 / 5400).epsilon(1e-6));
+}
+
+TEST_CASE("passing close to the singular pose: C swings fast there and the feed is slowed by C's speed limit") {
+  const Machine m = shipped("xyzac-trt");
+  // The axis passes 0.2 deg beside the vertical: the azimuth, and so C, turns 180 deg within a few poses.
+  std::vector<ToolPose> poses;
+  for (int i = -40; i <= 40; ++i) {
+    const Eigen::Vector3d k = Eigen::Vector3d(0.05 * i * M_PI / 180, 0.2 * M_PI / 180, 1).normalized();
+    poses.push_back({Eigen::Vector3d(0.5 * i, 0, 0), k});
+  }
+  PathOptions o;
+  o.tolerance_mm = 1e3;
+  o.angle_tolerance_deg = 90;
+  const JointPath p = solve_path(m, poses, {}, o);
+  REQUIRE(p.reachable);
+  CHECK(!p.singular.empty());
+  const auto feeds = block_feeds(m, p, 2000);
+  const int c = m.rotary[0].name == "C" ? 0 : 1;
+  int slowed = 0;
+  for (size_t i = 1; i < feeds.size(); ++i)
+    if (feeds[i].limiting_axis == 3 + c) {
+      ++slowed;
+      CHECK(std::find(p.singular.begin(), p.singular.end(), int(i)) != p.singular.end());
+      CHECK(feeds[i].tip_feed_mm_min < 2000);
+    }
+  MESSAGE(slowed << " blocks slowed by C near the singular pose, " << p.singular.size() << " poses near it");
+  CHECK(slowed > 0);
+}
