@@ -318,6 +318,18 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   return out;
 }
 
+void require_reachable(const JointPath& path, const std::vector<ToolPose>& poses, const std::string& patch) {
+  if (path.reachable) return;
+  const Eigen::Vector3d& tip = poses.at(size_t(path.failed_pose)).tip;
+  throw MachineError(fmt::format("patch '{}': pose {} (tip {:.3f}, {:.3f}, {:.3f} mm) is out of reach: {}", patch,
+                                 path.failed_pose, tip.x(), tip.y(), tip.z(), path.why));
+}
+
+Joints programmed(const Machine& m, const Joints& joints, const ToolPose& pose) {
+  if (!m.controller.tcp && !m.controller.linuxcnc_trt) return joints;
+  return {pose.tip, joints.rotary};
+}
+
 std::vector<BlockFeed> block_feeds(const Machine& m, const JointPath& path, double feed) {
   if (!(feed > 0)) throw InputError("feed: must be > 0 mm/min");
   std::vector<BlockFeed> out(path.joints.size());

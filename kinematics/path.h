@@ -43,6 +43,13 @@ struct JointPath {
 [[nodiscard]] JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::vector<double> t,
                                    const PathOptions& options, const IntendedMotion& motion = {});
 
+// Throws MachineError "patch 'NAME': pose I (tip x, y, z mm) is out of reach: WHY" when the path is not reachable.
+void require_reachable(const JointPath& path, const std::vector<ToolPose>& poses, const std::string& patch);
+
+// What a program states for a pose: with TCP (G43.4, TCPM, TRAORI, LinuxCNC trt kinematics) the tip
+// in part coordinates and the rotary angles; without, the machine joints.
+[[nodiscard]] Joints programmed(const Machine& m, const Joints& joints, const ToolPose& pose);
+
 struct BlockFeed {
   double minutes = 0;       // duration of the block (from the previous pose)
   double inverse_time = 0;  // G93 F word: 1 / minutes

@@ -4,6 +4,8 @@
 
 #include <Eigen/Geometry>
 
+#include "core/errors.h"
+
 using namespace flankcam;
 
 namespace {
@@ -93,6 +95,12 @@ TEST_CASE("out of reach: a tilt beyond the A limits names the pose and the axis"
   CHECK_FALSE(p.reachable);
   CHECK(p.failed_pose == 21);
   CHECK(p.why.find("rotary axis A") != std::string::npos);
+  try {
+    require_reachable(p, poses, "flank-2");
+    FAIL("no error");
+  } catch (const MachineError& e) {
+    CHECK(std::string(e.what()).find("patch 'flank-2': pose 21 (tip 0.000, 0.000, 0.000 mm) is out of reach: rotary axis A") == 0);
+  }
 
   std::vector<ToolPose> far = {{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d::UnitZ()}, {Eigen::Vector3d(900, 0, 0), Eigen::Vector3d::UnitZ()}};
   const JointPath q = solve_path(m, far, {}, {});
@@ -182,4 +190,20 @@ TEST_CASE("passing close to the singular pose: C swings fast there and the feed 
     }
   MESSAGE(slowed << " blocks slowed by C near the singular pose, " << p.singular.size() << " poses near it");
   CHECK(slowed > 0);
+}
+
+TEST_CASE("programmed coordinates: tip and angles with TCP, machine joints without") {
+  const ToolPose pose{Eigen::Vector3d(12, -7, 3), tilted(20, 45)};
+  for (const std::string name : {"xyzac-trt", "xyzbc-head-table"}) {
+    CAPTURE(name);
+    const Machine m = shipped(name);
+    const Joints q = inverse(m, pose, 90).front();
+    const Joints p = programmed(m, q, pose);
+    CHECK(p.rotary == q.rotary);
+    if (m.controller.tcp)
+      CHECK((p.linear - pose.tip).norm() == 0);
+    else
+      CHECK((p.linear - q.linear).norm() == 0);
+    CHECK((q.linear - pose.tip).norm() > 1);  // joints and tip differ for a tilted tool away from the pivots
+  }
 }
