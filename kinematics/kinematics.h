@@ -10,14 +10,10 @@
 #include <array>
 #include <vector>
 
+#include "core/pose.h"
 #include "kinematics/machine.h"
 
 namespace flankcam {
-
-struct ToolPose {
-  Eigen::Vector3d tip = Eigen::Vector3d::Zero();       // mm, part frame
-  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();     // unit, tip -> spindle, part frame
-};
 
 struct Joints {
   Eigen::Vector3d linear = Eigen::Vector3d::Zero();  // X, Y, Z, mm

@@ -1,0 +1,173 @@
+#include "core/collision.h"
+
+#include <doctest/doctest.h>
+
+#include "core/envelope.h"
+#include "tests/test_util.h"
+
+using namespace flankcam;
+
+namespace {
+// Cylinder cutter r = 5 over 20 mm, shank Ø12 x 30, holder cone Ø30 -> Ø50 over 40 mm.
+ToolAssembly assembly() {
+  ToolAssembly t;
+  for (int j = 0; j <= 10; ++j) t.cutter.emplace_back(2.0 * j, 5.0);
+  t.shank_length = 30, t.shank_diameter = 12;
+  t.holder_length = 40, t.holder_diameter = 30, t.holder_diameter_far = 50;
+  return t;
+}
+
+TriMesh plane(double size) {
+  TriMesh m;
+  m.vertices = {{-size, -size, 0}, {size, -size, 0}, {size, size, 0}, {-size, size, 0}};
+  m.faces = {{0, 1, 2}, {0, 2, 3}};
+  return m;
+}
+
+// Closed box [lo, hi].
+TriMesh box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+  TriMesh m;
+  for (int k = 0; k < 8; ++k) m.vertices.emplace_back(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z());
+  m.faces = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4}, {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
+  return m;
+}
+
+// A cylinder of radius r around the line (0, y0, z0) + x e_x, x in [x0, x1], n segments.
+TriMesh pipe(double r, double y0, double z0, double x0, double x1, int n) {
+  TriMesh m;
+  for (int e = 0; e < 2; ++e)
+    for (int k = 0; k < n; ++k) {
+      const double a = 2 * M_PI * k / n;
+      m.vertices.emplace_back(e ? x1 : x0, y0 + r * std::cos(a), z0 + r * std::sin(a));
+    }
+  for (int k = 0; k < n; ++k) {
+    const int k1 = (k + 1) % n;
+    m.faces.push_back({k, k1, n + k1});
+    m.faces.push_back({k, n + k1, n + k});
+  }
+  return m;
+}
+}  // namespace
+
+TEST_CASE("holder cone against a plane: the exact interference depth at the cone's wide end") {
+  const SurfaceIndex part(plane(500));
+  const ToolAssembly t = assembly();
+  CollisionOptions o;
+  o.clearance_mm = 0.5;
+  for (double height : {24.0, 24.9, 25.3, 26.0}) {
+    CAPTURE(height);
+    // Axis parallel to the plane at `height`: the cone's rim (r = 25) comes to 25 - height.
+    const std::vector<ToolPose> poses = {{Eigen::Vector3d(0, 0, height), Eigen::Vector3d::UnitX()},
+                                         {Eigen::Vector3d(10, 0, height), Eigen::Vector3d::UnitX()}};
+    const CollisionReport r = check_collisions(part, poses, t, o);
+    if (height >= 25 + o.clearance_mm) {
+      CHECK(r.clear());
+      continue;
+    }
+    REQUIRE(r.intervals.size() == 1);
+    const CollisionInterval& iv = r.intervals[0];
+    CHECK(iv.component == Component::Holder);
+    CHECK(iv.max_depth_mm == doctest::Approx(25 - height).epsilon(1e-9));
+    CHECK(iv.at.z() == doctest::Approx(0));
+    CHECK(iv.at.x() - t.total_length() >= -1e-9);  // below the rim, somewhere along the 10 mm move
+    CHECK(iv.at.x() - t.total_length() <= 10 + 1e-9);
+    CHECK(iv.pose_begin == 0);
+    CHECK(iv.pose_end == 1);
+  }
+}
+
+TEST_CASE("holder cylinder against a parallel cylinder: exact depth; the cutter alone gouges when pushed in") {
+  ToolAssembly t = assembly();
+  t.holder_diameter = t.holder_diameter_far = 40;  // cylinder r = 20 over z in [50, 90]
+  CollisionOptions o;
+  o.clearance_mm = 0.5;
+  // Pipe r = 10 parallel to the tool axis (X), centre distance 29.3 -> overlap 0.7 mm with the holder,
+  // 13.3 mm from the shank, 14.3 mm from the cutter.
+  const SurfaceIndex part(pipe(10, 29.3, 0, -100, 300, 2880));
+  const std::vector<ToolPose> poses = {{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d::UnitX()}};
+  const CollisionReport r = check_collisions(part, poses, t, o);
+  REQUIRE(r.intervals.size() == 1);
+  CHECK(r.intervals[0].component == Component::Holder);
+  CHECK(r.intervals[0].max_depth_mm == doctest::Approx(0.7).epsilon(2e-4 / 0.7));  // 2880 flats: 6e-6 mm
+
+  // The cutter (r = 5) against the pipe moved to 14.8: 0.2 mm deep, beyond a 0.01 mm tolerance.
+  ToolAssembly bare = t;
+  bare.shank_length = bare.holder_length = 0;
+  const SurfaceIndex close(pipe(10, 14.8, 0, -100, 300, 2880));
+  const CollisionReport g = check_collisions(close, poses, bare, o);
+  REQUIRE(g.intervals.size() == 1);
+  CHECK(g.intervals[0].component == Component::Tool);
+  CHECK(g.intervals[0].max_depth_mm == doctest::Approx(0.2).epsilon(1e-3));
+}
+
+TEST_CASE("a holder passing a thin wall between two clear poses is caught") {
+  const ToolAssembly t = assembly();
+  CollisionOptions o;
+  o.clearance_mm = 0.5;
+  // Wall 0.2 mm thick at x = 0 above z = 55 (the holder's height when the tool stands on z = 0).
+  const SurfaceIndex part(box(Eigen::Vector3d(-0.1, -50, 55), Eigen::Vector3d(0.1, 50, 120)));
+  const std::vector<ToolPose> poses = {{Eigen::Vector3d(-40, 0, 0), Eigen::Vector3d::UnitZ()},
+                                       {Eigen::Vector3d(40, 0, 0), Eigen::Vector3d::UnitZ()}};
+  // Each pose alone is clear.
+  CHECK(check_collisions(part, {poses[0]}, t, o).clear());
+  CHECK(check_collisions(part, {poses[1]}, t, o).clear());
+  const CollisionReport r = check_collisions(part, poses, t, o);
+  REQUIRE(!r.clear());
+  bool holder = false;
+  for (const auto& iv : r.intervals) {
+    CHECK(iv.pose_begin == 0);
+    CHECK(iv.pose_end == 1);
+    holder |= iv.component == Component::Holder && iv.max_depth_mm > 20;  // the holder is cut right through
+  }
+  CHECK(holder);
+  MESSAGE(r.positions_checked << " positions, " << r.queries << " queries");
+}
+
+TEST_CASE("a clear flank motion along an exact envelope raises no alarm; pushing the part 0.2 mm in does") {
+  AnalyticMotionOptions mo;
+  mo.kind = "twist";
+  const LineMotion m = analytic_motion(mo);
+  const RadiusProfile prof = cone_profile(6, 9);
+  const EnvelopeGrid g = envelope_grid(m, prof, 80, 400, 1);
+  ToolAssembly t;
+  const double L = (m.b(0) - m.a(0)).norm();
+  for (int j = 0; j <= 40; ++j) t.cutter.emplace_back(L * j / 40, prof.d(j / 40.0));
+  t.shank_length = 20, t.shank_diameter = 10;
+  t.holder_length = 30, t.holder_diameter = 14, t.holder_diameter_far = 40;
+  std::vector<ToolPose> poses;
+  for (int i = 0; i <= 200; ++i) {
+    const double s = 0.1 + 0.8 * i / 200.0;  // inside the envelope's t range (its ends are open)
+    poses.push_back({m.a(s), (m.b(s) - m.a(s)).normalized()});
+  }
+  CollisionOptions o;
+  o.clearance_mm = 1;
+  o.gouge_tolerance_mm = 0.05;  // the mesh's tessellation error is up to 0.03 mm
+  const CollisionReport clear = check_collisions(SurfaceIndex(g.mesh), poses, t, o);
+  for (const auto& iv : clear.intervals) MESSAGE(to_string(iv.component) << " " << iv.max_depth_mm);
+  CHECK(clear.clear());
+
+  TriMesh pushed = g.mesh;
+  const auto normals = vertex_normals(g.mesh);
+  // Towards the tool: the side of the normals where the axis is.
+  const Eigen::Vector3d mid = 0.5 * (m.a(0.5) + m.b(0.5));
+  const SurfaceIndex original(g.mesh);
+  const Footpoint f = original.closest(mid);
+  const double towards = (mid - f.point).dot(f.normal) > 0 ? 1 : -1;
+  for (size_t v = 0; v < pushed.vertices.size(); ++v) pushed.vertices[v] += towards * 0.2 * normals[v];
+  const CollisionReport gouge = check_collisions(SurfaceIndex(pushed), poses, t, o);
+  REQUIRE(!gouge.clear());
+  for (const auto& iv : gouge.intervals) {
+    CHECK(iv.component == Component::Tool);
+    CHECK(iv.max_depth_mm == doctest::Approx(0.2).epsilon(0.2));
+  }
+}
+
+TEST_CASE("the assembly mesh is closed and spans the assembly") {
+  const ToolAssembly t = assembly();
+  const TriMesh m = assembly_mesh(t, {Eigen::Vector3d(1, 2, 3), Eigen::Vector3d::UnitY()}, 24);
+  const MeshTopology topo = mesh_topology(m);
+  CHECK(topo.boundary_edges == 0);
+  const BoundingBox b = bounding_box(m.vertices);
+  CHECK(b.max.y() - b.min.y() == doctest::Approx(t.total_length()));
+  CHECK(b.max.x() - b.min.x() == doctest::Approx(50).epsilon(0.01));
+}
