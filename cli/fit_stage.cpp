@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <optional>
 
 #include "core/atomic_file.h"
 #include "core/errors.h"
@@ -42,6 +43,54 @@ nlohmann::ordered_json error_report(const ErrorStats& e, const Similarity& frame
 }
 }  // namespace
 
+namespace {
+ToolAssembly assembly_of(const Job& job, const Similarity& fr, const FitResult& r) {
+  ToolAssembly a;
+  const double L = fr.length_to_mm(r.rails.length);
+  for (int j = 0; j <= 60; ++j) a.cutter.emplace_back(L * j / 60, fr.length_to_mm(r.tool.d(j / 60.0)));
+  const HolderJob& h = job.holder;
+  a.shank_length = h.shank_length, a.shank_diameter = h.shank_diameter;
+  a.holder_length = h.length, a.holder_diameter = h.diameter, a.holder_diameter_far = h.diameter_far;
+  a.holder_cylinder_length = h.cylinder_length;
+  return a;
+}
+
+// Collision and gouge checks of every patch against the whole part (mm).
+void check_job(const Job& job, FittedJob& f, const Progress& progress) {
+  std::optional<LoadedMesh> separate;
+  if (job.part != job.surface) separate = load_mesh(job.part.string());
+  const TriMesh& part = separate ? separate->mesh : f.surface.mesh;
+  progress(fmt::format("collision checks against {} ({} triangles), clearance {} mm", job.part.string(), part.faces.size(),
+                       job.clearance_mm));
+  const SurfaceIndex index(part);
+  CollisionOptions o;
+  o.clearance_mm = job.clearance_mm;
+  o.gouge_tolerance_mm = job.tolerance_mm;
+  for (FittedPatch& p : f.patches) {
+    const FitResult& r = p.fit.fit;
+    const int m = job.fit.samples_t;
+    p.poses.clear();
+    for (int i = 0; i < m; ++i) {
+      const double t = double(i) / (m - 1);
+      const Eigen::Vector3d a = f.frame.to_mm(r.rails.a.point(t)), b = f.frame.to_mm(r.rails.b.point(t));
+      p.poses.push_back({a, (b - a).normalized()});
+    }
+    p.assembly = assembly_of(job, f.frame, r);
+    p.collisions = check_collisions(index, p.poses, p.assembly, o);
+    for (const std::string& line : collision_summary(p)) progress(line);
+  }
+}
+}  // namespace
+
+std::vector<std::string> collision_summary(const FittedPatch& p) {
+  std::vector<std::string> out;
+  for (const CollisionInterval& iv : p.collisions.intervals)
+    out.push_back(fmt::format("patch {}: {} {} at poses {}-{}, {:.3f} mm deep at ({:.3f}, {:.3f}, {:.3f})", p.job->name,
+                              to_string(iv.component), iv.component == Component::Tool ? "gouges" : "collides",
+                              iv.pose_begin, iv.pose_end, iv.max_depth_mm, iv.at.x(), iv.at.y(), iv.at.z()));
+  return out;
+}
+
 FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   FittedJob out;
   out.surface = load_mesh(job.surface.string());
@@ -62,7 +111,9 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     o.fit.on_iteration = [&](int it, double objective) {
       progress(fmt::format("patch {}: iteration {}, F_motion {:.3e}", p.name, it, objective));
     };
-    FittedPatch fp{&p, fit_patch(index, unit_spec(p, out.frame), o)};
+    FittedPatch fp;
+    fp.job = &p;
+    fp.fit = fit_patch(index, unit_spec(p, out.frame), o);
     const FitResult& r = fp.fit.fit;
     progress(fmt::format("patch {}: eps {:.2e} -> {:.2e} of the diagonal ({:.4f} mm), coverage {:.1f}% within {} mm, "
                          "{:.1f} s + {:.1f} s",
@@ -70,6 +121,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
                          100 * fp.fit.coverage, job.tolerance_mm, fp.fit.seconds_init, fp.fit.seconds_opt));
     out.patches.push_back(std::move(fp));
   }
+  check_job(job, out, progress);
   return out;
 }
 
@@ -171,6 +223,19 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
                     {"max_mm", std::isfinite(dmax) ? round_mm(fr.length_to_mm(dmax)) : 0.0},
                     {"vertices_not_reached", uncovered},
                     {"envelope_folded_triangles", p.fit.machined.omega.folded_triangles}};
+  auto& col = j["collisions"] = nlohmann::ordered_json::array();
+  for (const CollisionInterval& iv : p.collisions.intervals)
+    col.push_back({{"component", to_string(iv.component)},
+                   {"poses", {iv.pose_begin, iv.pose_end}},
+                   {"worst_pose", iv.worst_pose},
+                   {"depth_mm", round_mm(iv.max_depth_mm)},
+                   {"at_mm", vec_mm(iv.at)}});
+  j["collision_check"] = {{"part", job.part.string()},
+                          {"clearance_mm", job.clearance_mm},
+                          {"gouge_tolerance_mm", job.tolerance_mm},
+                          {"positions_checked", p.collisions.positions_checked},
+                          {"note", "depth_mm > 0: inside the tool/shank/holder; tool: inside the cutter beyond the tolerance; "
+                                   "shank/holder: closer than the clearance when <= 0"}};
   j["iterations"] = r.iterations;
   j["converged"] = r.converged;
   if (p.fit.explored) {
@@ -212,7 +277,20 @@ std::vector<std::string> write_patch_files(const std::filesystem::path& out, con
     for (const Eigen::Vector2d& zr : meridian(p.fit.fit.tool, p.fit.fit.rails.length))
       o << fmt::format("{:.6f},{:.6f}\n", round_mm(fr.length_to_mm(zr.x())), round_mm(fr.length_to_mm(zr.y())));
   });
-  return {name + "-envelope.ply", name + "-deviation.ply", name + "-tool.csv"};
+  std::vector<std::string> files = {name + "-envelope.ply", name + "-deviation.ply", name + "-tool.csv"};
+  if (!p.collisions.clear()) {
+    TriMesh all;
+    for (const CollisionInterval& iv : p.collisions.intervals) {
+      const TriMesh one = assembly_mesh(p.assembly, p.poses[size_t(iv.worst_pose)]);
+      const int base = int(all.vertices.size());
+      all.vertices.insert(all.vertices.end(), one.vertices.begin(), one.vertices.end());
+      for (auto fc : one.faces) all.faces.push_back({fc[0] + base, fc[1] + base, fc[2] + base});
+    }
+    write_obj((out / (name + "-collisions.obj")).string(), all,
+              "patch " + name + ": tool assembly at the worst pose of each collision interval, mm");
+    files.push_back(name + "-collisions.obj");
+  }
+  return files;
 }
 
 }  // namespace flankcam::cli

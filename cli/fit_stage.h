@@ -10,6 +10,7 @@
 
 #include "cli/job.h"
 #include "core/mesh.h"
+#include "core/collision.h"
 #include "core/patch.h"
 
 namespace flankcam::cli {
@@ -18,7 +19,10 @@ using Progress = std::function<void(const std::string&)>;  // one line of progre
 
 struct FittedPatch {
   const PatchJob* job = nullptr;
-  PatchFit fit;  // unit frame
+  PatchFit fit;                  // unit frame
+  std::vector<ToolPose> poses;   // the fitted motion at its samples t_i, mm, part coordinates
+  ToolAssembly assembly;         // cutter spheres from the fit, shank and holder from the job, mm
+  CollisionReport collisions;    // against the whole part
 };
 
 struct FittedJob {
@@ -41,8 +45,12 @@ struct FittedJob {
 [[nodiscard]] nlohmann::ordered_json surface_report(const Job& job, const FittedJob& fitted);
 [[nodiscard]] nlohmann::ordered_json patch_report(const Job& job, const FittedJob& fitted, const FittedPatch& patch);
 
+// One line per collision interval: "patch P: holder collides at poses 12-17, 0.731 mm deep at (x, y, z)".
+[[nodiscard]] std::vector<std::string> collision_summary(const FittedPatch& patch);
+
 // Files of a fitted patch in `out`: NAME-envelope.ply (Ω with its deviation from Φ), NAME-deviation.ply
-// (Φ with its deviation from Ω), NAME-tool.csv (meridian z, r in mm). Returns the file names.
+// (Φ with its deviation from Ω), NAME-tool.csv (meridian z, r in mm) and, when it collides,
+// NAME-collisions.obj (the assembly at the worst pose of each interval). Returns the file names.
 std::vector<std::string> write_patch_files(const std::filesystem::path& out, const Job& job, const FittedJob& fitted,
                                            const FittedPatch& patch);
 

@@ -138,7 +138,7 @@ Job read_job(const std::filesystem::path& file) {
   }
   const Reader r(name);
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
-  r.only_keys(root, "", {"surface", "tool", "tolerance", "sampling", "weights", "fit", "patches"});
+  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "tool", "tolerance", "sampling", "weights", "fit", "patches"});
 
   Job job;
   job.file = file;
@@ -149,6 +149,25 @@ Job read_job(const std::filesystem::path& file) {
   if (!std::filesystem::is_regular_file(job.surface))
     r.fail(root["surface"], "surface", "file not found: " + job.surface.string());
 
+  job.part = job.surface;
+  if (root["part"]) {
+    const std::filesystem::path part = r.text(root["part"], "part");
+    job.part = part.is_absolute() ? part : base / part;
+    if (!std::filesystem::is_regular_file(job.part)) r.fail(root["part"], "part", "file not found: " + job.part.string());
+  }
+  if (const YAML::Node h = root["holder"]) {
+    r.only_keys(h, "holder", {"shank_length", "shank_diameter", "length", "diameter", "diameter_far", "cylinder_length"});
+    HolderJob& hj = job.holder;
+    const auto get = [&](const char* key, double& v) {
+      if (h[key]) v = r.non_negative(h[key], std::string("holder.") + key);
+    };
+    get("shank_length", hj.shank_length), get("shank_diameter", hj.shank_diameter), get("length", hj.length);
+    get("diameter", hj.diameter), get("diameter_far", hj.diameter_far), get("cylinder_length", hj.cylinder_length);
+    if (!h["diameter_far"]) hj.diameter_far = hj.diameter;
+    if (hj.shank_length > 0 && !(hj.shank_diameter > 0)) r.fail(h, "holder.shank_diameter", "must be > 0 with a shank");
+    if (hj.length + hj.cylinder_length > 0 && !(hj.diameter > 0)) r.fail(h, "holder.diameter", "must be > 0 with a holder");
+  }
+  if (root["clearance"]) job.clearance_mm = r.positive(root["clearance"], "clearance");
   if (const YAML::Node t = root["tool"]) {
     r.only_keys(t, "tool", {"shape", "control_points"});
     if (t["shape"]) job.fit.shape = read_shape(r, t["shape"]);

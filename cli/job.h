@@ -21,9 +21,18 @@ struct PatchJob {
   double length_mm = 0;  // <= 0: mean length of the lines
 };
 
+// Shank and holder above the cutter (mm); absent: only the cutter is checked (gouge).
+struct HolderJob {
+  double shank_length = 0, shank_diameter = 0;
+  double length = 0, diameter = 0, diameter_far = 0, cylinder_length = 0;
+};
+
 struct Job {
   std::filesystem::path file;     // the job file itself
   std::filesystem::path surface;  // resolved against the job file's folder
+  std::filesystem::path part;     // the whole part for collision checks (default: the surface)
+  HolderJob holder;
+  double clearance_mm = 1.0;      // shank and holder to part
   double tolerance_mm = 0.01;
   std::optional<double> robust_mm;  // Cauchy scale of the fit; unset: FitOptions' relative default
   FitOptions fit;                   // sampling, weights, shape, iterations (unit-free parts)

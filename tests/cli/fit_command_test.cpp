@@ -165,3 +165,35 @@ TEST_CASE("flankcam fit: job errors name the key and line, exit 2 and write noth
   }
   CHECK(test::run_flankcam("fit " + dir.file("absent.yaml") + " --out " + dir.file("out"), dir).code == 2);
 }
+
+TEST_CASE("flankcam fit checks shank and holder against the part: a shank wider than the tool is reported") {
+  test::ScratchDir dir("cli-fit-collide");
+  const Generated g = generate(dir);
+  std::string job = job_text(g);
+  job = job.substr(0, job.find("  - name: line-driven"));
+  for (const std::string shank : {"8", "30"}) {
+    CAPTURE(shank);
+    // 0.05 mm: the test mesh (40 x 140) is coarse; its facets cut 0.03 mm into the tool at the edges.
+    std::string with = job;
+    with.replace(with.find("tolerance: 0.01"), 15, "tolerance: 0.05");
+    with.insert(with.find("tolerance:"), "holder: {shank_length: 20, shank_diameter: " + shank +
+                                             ", length: 30, diameter: 32, diameter_far: 50}\nclearance: 0.5\n");
+    test::write_text(dir.file("job.yaml"), with);
+    const std::string out = dir.file("out" + shank);
+    const test::RunResult run = test::run_flankcam("fit " + dir.file("job.yaml") + " --out " + out, dir);
+    REQUIRE_MESSAGE(run.code == 0, run.err);
+    const nlohmann::json report = nlohmann::json::parse(test::read_text(out + "/report.json"));
+    const auto& col = report["patches"][0]["collisions"];
+    if (shank == "8") {
+      CHECK_MESSAGE(col.empty(), run.err);  // Ø8 stays inside the cone's 6-9 mm radii: clear, and no gouge on the exact envelope
+      CHECK_FALSE(std::filesystem::exists(out + "/surface-driven-collisions.obj"));
+    } else {
+      REQUIRE(!col.empty());
+      CHECK(std::string(col[0]["component"]) == "shank");
+      // The shank's end face (r = 15) sits 0.1 mm above the envelope's top edge: within the 0.5 mm clearance.
+      CHECK(double(col[0]["depth_mm"]) > -0.5);
+      CHECK(run.err.find("patch surface-driven: shank collides at poses") != std::string::npos);
+      CHECK(std::filesystem::file_size(out + "/surface-driven-collisions.obj") > 1000);
+    }
+  }
+}
