@@ -15,6 +15,7 @@ struct FitArgs {
   std::string job, out;
   int threads = 2;
   bool quiet = false;
+  bool allow_collisions = false;
 };
 
 int run_fit(const FitArgs& args) {
@@ -49,7 +50,18 @@ int run_fit(const FitArgs& args) {
   }
   write_file_atomically((out / "report.json").string(), [&](std::ostream& o) { o << report.dump(1) << '\n'; });
   fmt::print("report: {}\n", (out / "report.json").string());
-  return 0;
+  // A colliding or gouging motion must not go to a machine unnoticed: one line per patch, exit 4.
+  int colliding = 0;
+  for (const FittedPatch& p : fitted.patches) {
+    if (p.collisions.clear()) continue;
+    ++colliding;
+    std::vector<std::string> parts;
+    for (const CollisionInterval& iv : p.collisions.intervals)
+      parts.push_back(fmt::format("{} {}-{} ({:.3f} mm)", to_string(iv.component), iv.pose_begin, iv.pose_end, iv.max_depth_mm));
+    fmt::print(stderr, "flankcam: patch {} {}collides: {}\n", p.job->name, args.allow_collisions ? "(allowed) " : "",
+               fmt::join(parts, ", "));
+  }
+  return colliding > 0 && !args.allow_collisions ? 4 : 0;
 }
 }  // namespace
 
@@ -60,6 +72,7 @@ Run add_fit_command(CLI::App& app) {
   cmd->add_option("--out", args->out, "output directory")->required();
   cmd->add_option("--threads", args->threads, "threads")->capture_default_str()->check(CLI::Range(1, 256));
   cmd->add_flag("--quiet", args->quiet, "no progress on stderr");
+  cmd->add_flag("--allow-collisions", args->allow_collisions, "exit 0 even when a patch collides or gouges");
   return [args] { return run_fit(*args); };
 }
 
