@@ -8,74 +8,20 @@
 #include <set>
 
 #include "core/errors.h"
+#include "core/yaml_fields.h"
 
 namespace flankcam::cli {
 
 namespace {
 
-// Reads typed values out of the YAML tree; every failure names file, line and key path.
-class Reader {
- public:
-  explicit Reader(std::string file) : file_(std::move(file)) {}
+using Reader = YamlFields<InputError>;
 
-  [[noreturn]] void fail(const YAML::Node& node, const std::string& key, const std::string& what) const {
-    const YAML::Mark m = node.Mark();
-    if (m.is_null()) throw InputError(fmt::format("{}: {}: {}", file_, key, what));
-    throw InputError(fmt::format("{}:{}: {}: {}", file_, m.line + 1, key, what));
-  }
-
-  void only_keys(const YAML::Node& map, const std::string& key, const std::set<std::string>& allowed) const {
-    if (!map.IsMap()) fail(map, key.empty() ? "job" : key, "expected a mapping of keys");
-    for (const auto& kv : map) {
-      const std::string k = kv.first.as<std::string>();
-      if (!allowed.count(k)) {
-        std::string known;
-        for (const auto& a : allowed) known += (known.empty() ? "" : ", ") + a;
-        fail(kv.first, key.empty() ? k : key + "." + k, "unknown key (known: " + known + ")");
-      }
-    }
-  }
-
-  double number(const YAML::Node& n, const std::string& key) const {
-    if (!n.IsScalar()) fail(n, key, "expected a number");
-    double v = 0;
-    try {
-      v = n.as<double>();
-    } catch (const YAML::Exception&) {
-      fail(n, key, "expected a number, got '" + n.Scalar() + "'");
-    }
-    if (!std::isfinite(v)) fail(n, key, "must be finite, got '" + n.Scalar() + "'");
-    return v;
-  }
-  double positive(const YAML::Node& n, const std::string& key) const {
-    const double v = number(n, key);
-    if (!(v > 0)) fail(n, key, "must be > 0");
-    return v;
-  }
-  double non_negative(const YAML::Node& n, const std::string& key) const {
-    const double v = number(n, key);
-    if (!(v >= 0)) fail(n, key, "must be >= 0");
-    return v;
-  }
-  int integer(const YAML::Node& n, const std::string& key, int lo, int hi) const {
-    const double v = number(n, key);
-    if (v != std::floor(v) || v < lo || v > hi) fail(n, key, fmt::format("expected a whole number in {}..{}", lo, hi));
-    return int(v);
-  }
-  std::string text(const YAML::Node& n, const std::string& key) const {
-    if (!n.IsScalar()) fail(n, key, "expected a string");
-    return n.Scalar();
-  }
-  std::array<double, 6> line(const YAML::Node& n, const std::string& key) const {
-    if (!n.IsSequence() || n.size() != 6) fail(n, key, "expected 6 numbers [ax, ay, az, bx, by, bz] (mm)");
-    std::array<double, 6> l{};
-    for (size_t k = 0; k < 6; ++k) l[k] = number(n[k], fmt::format("{}[{}]", key, k));
-    return l;
-  }
-
- private:
-  std::string file_;
-};
+std::array<double, 6> read_line(const Reader& r, const YAML::Node& n, const std::string& key) {
+  if (!n.IsSequence() || n.size() != 6) r.fail(n, key, "expected 6 numbers [ax, ay, az, bx, by, bz] (mm)");
+  std::array<double, 6> l{};
+  for (size_t k = 0; k < 6; ++k) l[k] = r.number(n[k], fmt::format("{}[{}]", key, k));
+  return l;
+}
 
 ToolShape read_shape(const Reader& r, const YAML::Node& n) {
   const std::string s = r.text(n, "tool.shape");
@@ -102,14 +48,14 @@ PatchJob read_patch(const Reader& r, const YAML::Node& p, const std::string& key
     if (p["line"]) r.fail(p["line"], key + ".line", "not used with init: lines (use lines:)");
     const YAML::Node ls = p["lines"];
     if (!ls.IsSequence() || ls.size() < 2) r.fail(ls, key + ".lines", "expected a list of at least 2 lines");
-    for (size_t k = 0; k < ls.size(); ++k) job.lines_mm.push_back(r.line(ls[k], fmt::format("{}.lines[{}]", key, k)));
+    for (size_t k = 0; k < ls.size(); ++k) job.lines_mm.push_back(read_line(r, ls[k], fmt::format("{}.lines[{}]", key, k)));
   } else if (init == "line") {
     job.init = PatchInit::Line;
     if (!p["line"]) r.fail(p, key + ".line", "missing: init: line needs one user line");
     if (p["lines"]) r.fail(p["lines"], key + ".lines", "not used with init: line (use line:)");
     if (p["rail"]) r.fail(p["rail"], key + ".rail", "only for init: lines");
     if (p["length"]) r.fail(p["length"], key + ".length", "only for init: lines (the user line's length is kept)");
-    job.lines_mm.push_back(r.line(p["line"], key + ".line"));
+    job.lines_mm.push_back(read_line(r, p["line"], key + ".line"));
   } else {
     r.fail(p["init"], key + ".init", "unknown initialisation '" + init + "' (lines, line)");
   }
@@ -128,15 +74,8 @@ PatchJob read_patch(const Reader& r, const YAML::Node& p, const std::string& key
 Job read_job(const std::filesystem::path& file) {
   const std::string name = file.string();
   if (!std::filesystem::is_regular_file(file)) throw InputError(name + ": job file not found");
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(name);
-  } catch (const YAML::ParserException& e) {
-    throw InputError(fmt::format("{}:{}: not valid YAML: {}", name, e.mark.line + 1, e.msg));
-  } catch (const YAML::Exception& e) {
-    throw InputError(name + ": cannot read: " + e.what());
-  }
   const Reader r(name);
+  const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
   r.only_keys(root, "", {"surface", "part", "holder", "clearance", "tool", "tolerance", "sampling", "weights", "fit", "patches"});
 

@@ -7,8 +7,10 @@
 #include <cmath>
 #include <filesystem>
 #include <set>
+#include <tuple>
 
 #include "core/errors.h"
+#include "core/yaml_fields.h"
 
 namespace flankcam {
 
@@ -22,62 +24,13 @@ int Machine::tables() const {
 }
 
 namespace {
+using Fields = YamlFields<MachineError>;
 
-class Fields {
- public:
-  explicit Fields(std::string file) : file_(std::move(file)) {}
-  [[noreturn]] void fail(const YAML::Node& n, const std::string& key, const std::string& what) const {
-    const YAML::Mark m = n.Mark();
-    if (m.is_null()) throw MachineError(fmt::format("{}: {}: {}", file_, key, what));
-    throw MachineError(fmt::format("{}:{}: {}: {}", file_, m.line + 1, key, what));
-  }
-  YAML::Node need(const YAML::Node& parent, const std::string& child, const std::string& key) const {
-    const YAML::Node n = parent[child];
-    if (!n) fail(parent, key, "missing");
-    return n;
-  }
-  void only(const YAML::Node& map, const std::string& key, const std::set<std::string>& allowed) const {
-    if (!map.IsMap()) fail(map, key, "expected a mapping");
-    for (const auto& kv : map)
-      if (!allowed.count(kv.first.as<std::string>()))
-        fail(kv.first, (key.empty() ? "" : key + ".") + kv.first.as<std::string>(), "unknown field");
-  }
-  double number(const YAML::Node& n, const std::string& key) const {
-    double v = 0;
-    try {
-      if (!n.IsScalar()) throw YAML::Exception(YAML::Mark::null_mark(), "");
-      v = n.as<double>();
-    } catch (const YAML::Exception&) {
-      fail(n, key, "expected a number");
-    }
-    if (!std::isfinite(v)) fail(n, key, "must be finite");
-    return v;
-  }
-  bool boolean(const YAML::Node& n, const std::string& key) const {
-    try {
-      return n.as<bool>();
-    } catch (const YAML::Exception&) {
-      fail(n, key, "expected true or false");
-    }
-  }
-  std::string text(const YAML::Node& n, const std::string& key) const {
-    if (!n.IsScalar()) fail(n, key, "expected a string");
-    return n.Scalar();
-  }
-  Eigen::Vector3d vec(const YAML::Node& n, const std::string& key) const {
-    if (!n.IsSequence() || n.size() != 3) fail(n, key, "expected 3 numbers [x, y, z]");
-    return {number(n[0], key + "[0]"), number(n[1], key + "[1]"), number(n[2], key + "[2]")};
-  }
-  Eigen::Vector3d direction(const YAML::Node& n, const std::string& key) const {
-    const Eigen::Vector3d d = vec(n, key);
-    if (!(d.norm() > 1e-9)) fail(n, key, "zero direction");
-    return d.normalized();
-  }
-
- private:
-  std::string file_;
-};
-
+Eigen::Vector3d direction(const Fields& f, const YAML::Node& n, const std::string& key) {
+  const Eigen::Vector3d d = f.vec3(n, key);
+  if (!(d.norm() > 1e-9)) f.fail(n, key, "zero direction");
+  return d.normalized();
+}
 }  // namespace
 
 void validate(const Machine& m) {
@@ -104,36 +57,26 @@ void validate(const Machine& m) {
 
 Machine load_machine(const std::string& path) {
   if (!std::filesystem::is_regular_file(path)) throw MachineError(path + ": machine file not found");
-  YAML::Node root;
-  try {
-    root = YAML::LoadFile(path);
-  } catch (const YAML::ParserException& e) {
-    throw MachineError(fmt::format("{}:{}: not valid YAML: {}", path, e.mark.line + 1, e.msg));
-  }
   const Fields f(path);
+  const YAML::Node root = f.load();
   if (!root.IsMap()) throw MachineError(path + ": expected a mapping (name:, linear:, rotary:, ...)");
-  f.only(root, "", {"name", "description", "linear", "rotary", "spindle", "gauge_length", "controller"});
+  f.only_keys(root, "", {"name", "description", "linear", "rotary", "spindle", "gauge_length", "controller"});
   Machine m;
   m.file = path;
   m.name = f.text(f.need(root, "name", "name"), "name");
   if (root["description"]) m.description = f.text(root["description"], "description");
 
   const YAML::Node lin = f.need(root, "linear", "linear");
-  f.only(lin, "linear", {"X", "Y", "Z"});
+  f.only_keys(lin, "linear", {"X", "Y", "Z"});
   const char* lnames[3] = {"X", "Y", "Z"};
   for (int k = 0; k < 3; ++k) {
     const std::string key = std::string("linear.") + lnames[k];
     const YAML::Node a = f.need(lin, lnames[k], key);
-    f.only(a, key, {"limits", "speed"});
+    f.only_keys(a, key, {"limits", "speed"});
     LinearAxis& l = m.linear[size_t(k)];
     l.name = lnames[k];
-    const YAML::Node lim = f.need(a, "limits", key + ".limits");
-    if (!lim.IsSequence() || lim.size() != 2) f.fail(lim, key + ".limits", "expected [min, max] in mm");
-    l.min_mm = f.number(lim[0], key + ".limits[0]");
-    l.max_mm = f.number(lim[1], key + ".limits[1]");
-    if (!(l.min_mm < l.max_mm)) f.fail(lim, key + ".limits", "min must be below max");
-    l.max_speed_mm_min = f.number(f.need(a, "speed", key + ".speed"), key + ".speed");
-    if (!(l.max_speed_mm_min > 0)) f.fail(a["speed"], key + ".speed", "must be > 0 (mm/min)");
+    std::tie(l.min_mm, l.max_mm) = f.range(f.need(a, "limits", key + ".limits"), key + ".limits", "mm");
+    l.max_speed_mm_min = f.positive(f.need(a, "speed", key + ".speed"), key + ".speed");
   }
 
   const YAML::Node rot = f.need(root, "rotary", "rotary");
@@ -141,7 +84,7 @@ Machine load_machine(const std::string& path) {
   for (size_t k = 0; k < 2; ++k) {
     const YAML::Node a = rot[k];
     std::string key = fmt::format("rotary[{}]", k);
-    f.only(a, key, {"name", "carries", "direction", "pivot", "limits", "speed"});
+    f.only_keys(a, key, {"name", "carries", "direction", "pivot", "limits", "speed"});
     RotaryAxis& r = m.rotary[k];
     r.name = f.text(f.need(a, "name", key + ".name"), key + ".name");
     if (r.name != "A" && r.name != "B" && r.name != "C") f.fail(a["name"], key + ".name", "must be A, B or C");
@@ -153,32 +96,28 @@ Machine load_machine(const std::string& path) {
       r.carries = Carrier::Head;
     else
       f.fail(a["carries"], key + ".carries", "must be table or head");
-    r.direction = f.direction(f.need(a, "direction", key + ".direction"), key + ".direction");
-    if (a["pivot"]) r.pivot = f.vec(a["pivot"], key + ".pivot");
+    r.direction = direction(f, f.need(a, "direction", key + ".direction"), key + ".direction");
+    if (a["pivot"]) r.pivot = f.vec3(a["pivot"], key + ".pivot");
     const YAML::Node lim = f.need(a, "limits", key + ".limits");
     if (lim.IsScalar() && lim.Scalar() == "continuous") {
       r.continuous = true;
     } else {
-      if (!lim.IsSequence() || lim.size() != 2) f.fail(lim, key + ".limits", "expected [min, max] in degrees or continuous");
-      r.min_deg = f.number(lim[0], key + ".limits[0]");
-      r.max_deg = f.number(lim[1], key + ".limits[1]");
-      if (!(r.min_deg < r.max_deg)) f.fail(lim, key + ".limits", "min must be below max");
+      std::tie(r.min_deg, r.max_deg) = f.range(lim, key + ".limits", "degrees, or continuous");
     }
-    r.max_speed_deg_min = f.number(f.need(a, "speed", key + ".speed"), key + ".speed");
-    if (!(r.max_speed_deg_min > 0)) f.fail(a["speed"], key + ".speed", "must be > 0 (deg/min)");
+    r.max_speed_deg_min = f.positive(f.need(a, "speed", key + ".speed"), key + ".speed");
   }
   if (m.rotary[0].name == m.rotary[1].name) f.fail(rot[1]["name"], "rotary[1].name", "both rotary axes are " + m.rotary[0].name);
   if (m.rotary[0].carries == Carrier::Head && m.rotary[1].carries == Carrier::Table) std::swap(m.rotary[0], m.rotary[1]);
 
   const YAML::Node sp = f.need(root, "spindle", "spindle");
-  f.only(sp, "spindle", {"direction"});
-  m.spindle_direction = f.direction(f.need(sp, "direction", "spindle.direction"), "spindle.direction");
+  f.only_keys(sp, "spindle", {"direction"});
+  m.spindle_direction = direction(f, f.need(sp, "direction", "spindle.direction"), "spindle.direction");
   if (root["gauge_length"]) {
     m.gauge_length_mm = f.number(root["gauge_length"], "gauge_length");
     if (!(m.gauge_length_mm >= 0)) f.fail(root["gauge_length"], "gauge_length", "must be >= 0 (mm)");
   }
   if (const YAML::Node c = root["controller"]) {
-    f.only(c, "controller", {"tcp", "dialect", "inverse_time", "linuxcnc_trt"});
+    f.only_keys(c, "controller", {"tcp", "dialect", "inverse_time", "linuxcnc_trt"});
     if (c["tcp"]) m.controller.tcp = f.boolean(c["tcp"], "controller.tcp");
     if (c["dialect"]) m.controller.dialect = f.text(c["dialect"], "controller.dialect");
     if (c["inverse_time"]) m.controller.inverse_time = f.boolean(c["inverse_time"], "controller.inverse_time");

@@ -179,7 +179,7 @@ TEST_CASE("machine files: a missing field, a zero direction, limits in the wrong
       {replaced("{name: C, carries: table, direction: [0, 0, -1]", "{name: C, carries: table, direction: [-2, 0, 0]"),
        "rotary: the two rotary axes are parallel"},
       {replaced("carries: table, direction: [-1", "carries: bed, direction: [-1"), "rotary.A.carries: must be table or head"},
-      {replaced("name: xyzac-trt", "name: xyzac-trt\nspeed: 3"), "speed: unknown field"},
+      {replaced("name: xyzac-trt", "name: xyzac-trt\nspeed: 3"), "speed: unknown key"},
   };
   for (const auto& c : cases) {
     CAPTURE(c.expect);
