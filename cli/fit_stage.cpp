@@ -7,6 +7,8 @@
 
 #include "core/atomic_file.h"
 #include "core/errors.h"
+#include "postproc/apt.h"
+#include "postproc/tool_export.h"
 
 namespace flankcam::cli {
 
@@ -253,7 +255,7 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
 }
 
 std::vector<std::string> write_patch_files(const std::filesystem::path& out, const Job& job, const FittedJob& f,
-                                           const FittedPatch& p) {
+                                           const FittedPatch& p, bool program) {
   const Similarity& fr = f.frame;
   const std::string& name = p.job->name;
   const MachinedSurface& ms = p.fit.machined;
@@ -277,7 +279,22 @@ std::vector<std::string> write_patch_files(const std::filesystem::path& out, con
     for (const Eigen::Vector2d& zr : meridian(p.fit.fit.tool, p.fit.fit.rails.length))
       o << fmt::format("{:.6f},{:.6f}\n", round_mm(fr.length_to_mm(zr.x())), round_mm(fr.length_to_mm(zr.y())));
   });
-  std::vector<std::string> files = {name + "-envelope.ply", name + "-deviation.ply", name + "-tool.csv"};
+  std::vector<Eigen::Vector2d> profile;
+  for (const Eigen::Vector2d& zr : meridian(p.fit.fit.tool, p.fit.fit.rails.length))
+    profile.emplace_back(fr.length_to_mm(zr.x()), fr.length_to_mm(zr.y()));
+  write_tool_dxf((out / (name + "-tool.dxf")).string(), profile,
+                 fmt::format("patch {}, {} tool, length {:.3f} mm", name, to_string(p.fit.fit.tool.shape), p.assembly.cutter_length()));
+  std::vector<std::string> files = {name + "-envelope.ply", name + "-deviation.ply", name + "-tool.csv", name + "-tool.dxf"};
+  if (program) {
+    ClProgram cl = flank_program(name, p.poses, profile, job.feed_mm_min, job.spindle_rpm, job.lead_in_mm, job.retract_mm);
+    cl.comments.push_back(fmt::format("FLANKCAM FIT OF {}, EPS {:.4f} MM, TOLERANCE {} MM", job.surface.filename().string(),
+                                      f.frame.length_to_mm(p.fit.fit.eps_opt.max), job.tolerance_mm));
+    if (!p.collisions.clear()) cl.comments.push_back("WARNING: COLLISIONS ALLOWED, SEE REPORT.JSON");
+    write_apt((out / (name + ".apt")).string(), cl);
+    write_file_atomically((out / (name + "-cl.csv")).string(), [&](std::ostream& o) { o << cl_csv(cl); });
+    files.push_back(name + ".apt");
+    files.push_back(name + "-cl.csv");
+  }
   if (!p.collisions.clear()) {
     TriMesh all;
     for (const CollisionInterval& iv : p.collisions.intervals) {

@@ -51,7 +51,9 @@ struct FittedJob {
 // Files of a fitted patch in `out`: NAME-envelope.ply (Ω with its deviation from Φ), NAME-deviation.ply
 // (Φ with its deviation from Ω), NAME-tool.csv (meridian z, r in mm) and, when it collides,
 // NAME-collisions.obj (the assembly at the worst pose of each interval). Returns the file names.
+// With `program`, also NAME.apt (APT CL-data) and NAME-cl.csv (CL-data), flagged in a comment when
+// the patch collides; NAME-tool.dxf always.
 std::vector<std::string> write_patch_files(const std::filesystem::path& out, const Job& job, const FittedJob& fitted,
-                                           const FittedPatch& patch);
+                                           const FittedPatch& patch, bool program);
 
 }  // namespace flankcam::cli

@@ -77,7 +77,7 @@ Job read_job(const std::filesystem::path& file) {
   const Reader r(name);
   const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
-  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "tool", "tolerance", "sampling", "weights", "fit", "patches"});
+  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches"});
 
   Job job;
   job.file = file;
@@ -107,6 +107,11 @@ Job read_job(const std::filesystem::path& file) {
     if (hj.length + hj.cylinder_length > 0 && !(hj.diameter > 0)) r.fail(h, "holder.diameter", "must be > 0 with a holder");
   }
   if (root["clearance"]) job.clearance_mm = r.positive(root["clearance"], "clearance");
+  if (root["feed"]) job.feed_mm_min = r.positive(root["feed"], "feed");
+  if (root["spindle"]) job.spindle_rpm = r.positive(root["spindle"], "spindle");
+  if (root["lead_in"]) job.lead_in_mm = r.non_negative(root["lead_in"], "lead_in");
+  if (root["retract"]) job.retract_mm = r.positive(root["retract"], "retract");
+  if (job.retract_mm < job.lead_in_mm) r.fail(root["retract"] ? root["retract"] : root, "retract", "must be >= lead_in");
   if (const YAML::Node t = root["tool"]) {
     r.only_keys(t, "tool", {"shape", "control_points"});
     if (t["shape"]) job.fit.shape = read_shape(r, t["shape"]);

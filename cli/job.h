@@ -33,6 +33,8 @@ struct Job {
   std::filesystem::path part;     // the whole part for collision checks (default: the surface)
   HolderJob holder;
   double clearance_mm = 1.0;      // shank and holder to part
+  double feed_mm_min = 1000, spindle_rpm = 10000;  // for the CL-data
+  double lead_in_mm = 5, retract_mm = 50;          // approach and retract along the tool axis
   double tolerance_mm = 0.01;
   std::optional<double> robust_mm;  // Cauchy scale of the fit; unset: FitOptions' relative default
   FitOptions fit;                   // sampling, weights, shape, iterations (unit-free parts)

@@ -5,6 +5,7 @@
 #include <nlohmann/json.hpp>
 
 #include "core/closest_point.h"
+#include "postproc/apt.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -102,6 +103,20 @@ TEST_CASE("flankcam fit: report in mm whose axis lies at the reported radii from
     CHECK(ply.find(fmt::format("element vertex {}\n", surface.mesh().vertices.size())) != std::string::npos);
     CHECK(ply.find("property double deviation_mm") != std::string::npos);
   }
+  // The CL-data is the fitted motion: between approach and retract, one GOTO per axis row (tip a, unit axis).
+  for (const auto& p : report["patches"]) {
+    const std::string name = p["name"];
+    const ClProgram cl = read_apt(dir.file("out/" + name + ".apt"));
+    REQUIRE(cl.moves.size() == p["axis"].size() + 4);
+    for (size_t i = 0; i < p["axis"].size(); ++i) {
+      const auto& r = p["axis"][i];
+      const Eigen::Vector3d a(r[0], r[1], r[2]), b(r[3], r[4], r[5]);
+      const ClMove& m = cl.moves[i + 2];
+      CHECK_FALSE(m.rapid);
+      CHECK((m.pose.tip - a).norm() < 2e-6);
+      CHECK((m.pose.axis - (b - a).normalized()).norm() < 1e-6);
+    }
+  }
   // The recovered cone matches the generator's (6 -> 9 mm) where the envelope pins it down.
   const auto& sd = report["patches"][0]["radius"];
   CHECK(double(sd[10]) == doctest::Approx(double(g.truth["radius"][20])).epsilon(0.15));
@@ -187,6 +202,8 @@ TEST_CASE("flankcam fit checks shank and holder against the part: a shank wider 
       const test::RunResult allowed =
           test::run_flankcam("fit " + dir.file("job.yaml") + " --allow-collisions --quiet --out " + out + "-allowed", dir);
       CHECK(allowed.code == 0);
+      CHECK_FALSE(std::filesystem::exists(out + "/surface-driven.apt"));  // no program for a colliding motion ...
+      CHECK(test::read_text(out + "-allowed/surface-driven.apt").find("WARNING: COLLISIONS ALLOWED") != std::string::npos);
       CHECK(allowed.err.find("flankcam: patch surface-driven (allowed) collides: shank") != std::string::npos);
     }
     const nlohmann::json report = nlohmann::json::parse(test::read_text(out + "/report.json"));

@@ -1,0 +1,58 @@
+#include "postproc/tool_export.h"
+
+#include <fmt/format.h>
+
+#include <cmath>
+
+#include "core/atomic_file.h"
+#include "core/errors.h"
+
+namespace flankcam {
+
+ToolDimensions tool_dimensions(const std::vector<Eigen::Vector2d>& p) {
+  if (p.size() < 2) throw InputError("tool profile: at least two points");
+  ToolDimensions d;
+  d.length_mm = p.back().x() - std::min(0.0, p.front().x());
+  d.diameter_min_mm = INFINITY;
+  for (const auto& q : p) {
+    d.diameter_min_mm = std::min(d.diameter_min_mm, 2 * q.y());
+    d.diameter_max_mm = std::max(d.diameter_max_mm, 2 * q.y());
+  }
+  d.cone_half_angle_deg = std::atan2(p.back().y() - p.front().y(), p.back().x() - p.front().x()) * 180 / M_PI + 0.0;
+  return d;
+}
+
+namespace {
+// Fixed 6 decimals (1 nm), never "-0.000000".
+std::string num(double x) {
+  const double r = std::round(x * 1e6) / 1e6 + 0.0;
+  return fmt::format("{:.6f}", r);
+}
+void line(fmt::memory_buffer& b, const char* layer, const Eigen::Vector2d& p, const Eigen::Vector2d& q) {
+  fmt::format_to(std::back_inserter(b), "0\nLINE\n8\n{}\n10\n{}\n20\n{}\n30\n0.0\n11\n{}\n21\n{}\n31\n0.0\n", layer, num(p.x()),
+                 num(p.y()), num(q.x()), num(q.y()));
+}
+}  // namespace
+
+std::string tool_dxf(const std::vector<Eigen::Vector2d>& p, const std::string& title) {
+  if (p.size() < 2) throw InputError("tool profile: at least two points");
+  fmt::memory_buffer b;
+  auto o = std::back_inserter(b);
+  fmt::format_to(o, "999\nflankcam tool profile, mm, axis along X, tip at the origin: {}\n", title);
+  fmt::format_to(o, "0\nSECTION\n2\nHEADER\n9\n$ACADVER\n1\nAC1009\n9\n$MEASUREMENT\n70\n1\n0\nENDSEC\n");
+  fmt::format_to(o, "0\nSECTION\n2\nENTITIES\n");
+  const Eigen::Vector2d start(p.front().x(), 0), end(p.back().x(), 0);
+  line(b, "PROFILE", start, p.front());
+  for (size_t k = 1; k < p.size(); ++k) line(b, "PROFILE", p[k - 1], p[k]);
+  line(b, "PROFILE", p.back(), end);
+  line(b, "AXIS", end, start);
+  fmt::format_to(o, "0\nENDSEC\n0\nEOF\n");
+  return {b.data(), b.size()};
+}
+
+void write_tool_dxf(const std::string& path, const std::vector<Eigen::Vector2d>& p, const std::string& title) {
+  const std::string text = tool_dxf(p, title);
+  write_file_atomically(path, [&](std::ostream& out) { out << text; });
+}
+
+}  // namespace flankcam

@@ -1,0 +1,23 @@
+// The custom tool handed to tool grinders and simulators: its half-profile (meridian) as DXF R12
+// (axis along X, profile above it, origin at the tool tip, mm) and its key dimensions.
+#pragma once
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+namespace flankcam {
+
+struct ToolDimensions {
+  double length_mm = 0;                         // along the axis, tip (z = 0) to the end of the cutting part
+  double diameter_min_mm = 0, diameter_max_mm = 0;
+  double cone_half_angle_deg = 0;               // from the end diameters; 0 for a cylinder
+};
+// `profile`: meridian points (z, r) in mm from the tip, z increasing.
+[[nodiscard]] ToolDimensions tool_dimensions(const std::vector<Eigen::Vector2d>& profile);
+
+// DXF R12 ASCII text: the profile as connected LINE entities on layer PROFILE, closed by the end
+// faces down to the axis and the axis itself on layer AXIS; `title` goes into a comment (999).
+[[nodiscard]] std::string tool_dxf(const std::vector<Eigen::Vector2d>& profile, const std::string& title);
+void write_tool_dxf(const std::string& path, const std::vector<Eigen::Vector2d>& profile, const std::string& title);
+
+}  // namespace flankcam

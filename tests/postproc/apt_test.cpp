@@ -1,0 +1,94 @@
+#include "postproc/apt.h"
+
+#include <doctest/doctest.h>
+
+#include <Eigen/Geometry>
+
+#include "core/errors.h"
+#include "tests/test_util.h"
+
+using namespace flankcam;
+
+namespace {
+// A small fixed patch: 5 poses of a cone tool (r 6 -> 9 over 40 mm) sweeping an arc with a twist.
+ClProgram small_patch() {
+  std::vector<ToolPose> poses;
+  for (int i = 0; i < 5; ++i) {
+    const double a = i * 0.1;
+    const Eigen::Vector3d axis = Eigen::AngleAxisd(0.2 + 0.05 * i, Eigen::Vector3d(std::cos(a), std::sin(a), 0)) * Eigen::Vector3d::UnitZ();
+    poses.push_back({Eigen::Vector3d(100 * std::cos(a), 100 * std::sin(a), -5.5 + i), axis});
+  }
+  std::vector<Eigen::Vector2d> profile;
+  for (int k = 0; k <= 4; ++k) profile.emplace_back(10.0 * k, 6 + 0.75 * k);
+  ClProgram p = flank_program("SMALL-PATCH", poses, profile, 800, 12000, 5, 50);
+  p.comments = {"FLANKCAM TEST PATCH, EPS 0.0040 MM"};
+  return p;
+}
+}  // namespace
+
+TEST_CASE("APT golden file for a small fixed patch") {
+  const std::string text = apt_text(small_patch());
+  const std::string golden = std::string(TEST_DATA) + "/golden/small-patch.apt";
+  if (std::getenv("FLANKCAM_UPDATE_GOLDEN")) test::write_text(golden, text);
+  CHECK(text == test::read_text(golden));
+  for (size_t a = 0, b; a < text.size(); a = b + 1) {  // ISO 4343: data before column 72
+    b = text.find('\n', a);
+    CHECK(b - a <= 72);
+  }
+}
+
+TEST_CASE("APT round trip: the moves, feeds, cutter and profile read back") {
+  const ClProgram p = small_patch();
+  test::ScratchDir dir("apt");
+  write_apt(dir.file("p.apt"), p);
+  const ClProgram q = read_apt(dir.file("p.apt"));
+  REQUIRE(q.moves.size() == p.moves.size());
+  for (size_t k = 0; k < p.moves.size(); ++k) {
+    CAPTURE(k);
+    CHECK((q.moves[k].pose.tip - p.moves[k].pose.tip).norm() < 1e-6);
+    CHECK((q.moves[k].pose.axis - p.moves[k].pose.axis).norm() < 2e-9);
+    CHECK(q.moves[k].rapid == p.moves[k].rapid);
+    CHECK(q.moves[k].feed_mm_min == p.moves[k].feed_mm_min);
+  }
+  // Approach along the first axis: clearance, lead-in, then the cut.
+  CHECK(p.moves[0].rapid);
+  CHECK((p.moves[0].pose.tip - p.moves[2].pose.tip).norm() == doctest::Approx(50));
+  CHECK((p.moves[1].pose.tip - p.moves[2].pose.tip).norm() == doctest::Approx(5));
+  CHECK(q.cutter.d == doctest::Approx(12));
+  CHECK(q.cutter.beta_deg == doctest::Approx(std::atan(3.0 / 40) * 180 / M_PI).epsilon(1e-6));
+  CHECK(q.cutter.h == doctest::Approx(40));
+  CHECK(q.profile.size() == 5);
+  CHECK(q.spindle_rpm == 12000);
+  CHECK(q.partno == "SMALL-PATCH");
+  CHECK(cl_csv(p).find("2,feed,100.000000,0.000000,-5.500000,") != std::string::npos);
+}
+
+TEST_CASE("APT reader: other posts' orders and continuations are accepted, junk names its line") {
+  const ClProgram p = parse_apt("PARTNO/X\nUNITS/MM\nSPINDL/RPM,9000,CCLW\nFEDRAT/MMPM,450\nGOTO/1,2,3,$\n  0,0,1\n"
+                                "RAPID\nGOTO/4,5,6\n$$ a comment\nFEDRAT/300.5,MMPM\nGOTO/7,8,9,0.6,0,0.8\nEND\nFINI\n",
+                                "other.apt");
+  REQUIRE(p.moves.size() == 3);
+  CHECK(p.spindle_rpm == 9000);
+  CHECK_FALSE(p.clockwise);
+  CHECK(p.moves[0].feed_mm_min == 450);
+  CHECK(p.moves[1].rapid);
+  CHECK(p.moves[1].pose.axis == Eigen::Vector3d::UnitZ());  // 3 values keep the last axis
+  CHECK(p.moves[2].feed_mm_min == 300.5);
+  CHECK(p.moves[2].pose.axis.x() == doctest::Approx(0.6));
+
+  const auto error = [](const std::string& text) {
+    try {
+      (void)parse_apt(text, "bad.apt");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  CHECK(error("UNITS/MM\nFEDRAT/100\nGOTO/1,2\n") == "bad.apt:3: GOTO: expected 3 or 6 values, got 2");
+  CHECK(error("FEDRAT/100\nGOTO/1,2,x3\n") == "bad.apt:2: GOTO z: 'x3' is not a number");
+  CHECK(error("GOTO/1,2,3\n") == "bad.apt:1: GOTO: a feed move before any FEDRAT");
+  CHECK(error("UNITS/INCHES\n") == "bad.apt:1: UNITS: only MM is supported, got 'INCHES'");
+  CHECK(error("FEDRAT/100\nGOTO/1,2,3,0,0,2\n") == "bad.apt:2: GOTO: the tool axis (i, j, k) is not a unit vector");
+  CHECK(error("FEDRAT/100\nGOTO/1,2,$\n") == "bad.apt:2: the file ends inside a statement continued with $");
+  CHECK(error("PARTNO/X\n") == "bad.apt: no GOTO moves");
+}
