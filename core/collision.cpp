@@ -121,10 +121,8 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
       const double angle = std::acos(std::clamp(p.axis.dot(q.axis), -1.0, 1.0));
       const double move = (q.tip - p.tip).norm() + angle * total;
       const int steps = std::max(1, int(std::ceil(move / (0.5 * o.clearance_mm))));
-      const Eigen::Quaterniond turn = Eigen::Quaterniond::FromTwoVectors(p.axis, q.axis);
       for (int s = 1; s < steps; ++s) {
-        const double f = double(s) / steps;
-        pos.push_back({(1 - f) * p.tip + f * q.tip, (Eigen::Quaterniond::Identity().slerp(f, turn) * p.axis).normalized()});
+        pos.push_back(interpolate(p, q, double(s) / steps));
         pose_of.push_back(int(i) - 1);
         is_pose.push_back(0);
       }

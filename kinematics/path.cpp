@@ -25,14 +25,6 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kDeg = M_PI / 180;
 
-ToolPose lerp_pose(const ToolPose& p, const ToolPose& q, double f) {
-  ToolPose r;
-  r.tip = (1 - f) * p.tip + f * q.tip;
-  const Eigen::Quaterniond full = Eigen::Quaterniond::FromTwoVectors(p.axis, q.axis);
-  r.axis = Eigen::Quaterniond::Identity().slerp(f, full) * p.axis;
-  return r;
-}
-
 // A candidate joint solution at one pose: angles (NaN = free) and IK branch.
 struct Candidate {
   std::array<double, 2> deg;
@@ -226,7 +218,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   const auto intended = [&](int i0, double tt) {
     if (motion) return motion(tt);
     const double f = (tt - t[i0]) / (t[i0 + 1] - t[i0]);
-    return lerp_pose(poses[i0], poses[i0 + 1], f);
+    return interpolate(poses[i0], poses[i0 + 1], f);
   };
   // The checks sample each block at a few points; the error between them peaks a few percent higher
   // (measured up to 4%), so the blocks are held to 90% of the tolerance.

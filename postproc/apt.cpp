@@ -11,15 +11,9 @@
 
 #include "core/atomic_file.h"
 #include "core/errors.h"
+#include "core/number_format.h"
 
 namespace flankcam {
-
-namespace {
-std::string fixed(double x, int decimals) {
-  const double scale = std::pow(10.0, decimals);
-  return fmt::format("{:.{}f}", std::round(x * scale) / scale + 0.0, decimals);
-}
-}  // namespace
 
 AptCutter enveloping_cutter(const std::vector<Eigen::Vector2d>& p) {
   if (p.size() < 2) throw InputError("tool profile: at least two points");

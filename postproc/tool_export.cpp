@@ -6,6 +6,7 @@
 
 #include "core/atomic_file.h"
 #include "core/errors.h"
+#include "core/number_format.h"
 
 namespace flankcam {
 
@@ -23,14 +24,9 @@ ToolDimensions tool_dimensions(const std::vector<Eigen::Vector2d>& p) {
 }
 
 namespace {
-// Fixed 6 decimals (1 nm), never "-0.000000".
-std::string num(double x) {
-  const double r = std::round(x * 1e6) / 1e6 + 0.0;
-  return fmt::format("{:.6f}", r);
-}
 void line(fmt::memory_buffer& b, const char* layer, const Eigen::Vector2d& p, const Eigen::Vector2d& q) {
-  fmt::format_to(std::back_inserter(b), "0\nLINE\n8\n{}\n10\n{}\n20\n{}\n30\n0.0\n11\n{}\n21\n{}\n31\n0.0\n", layer, num(p.x()),
-                 num(p.y()), num(q.x()), num(q.y()));
+  fmt::format_to(std::back_inserter(b), "0\nLINE\n8\n{}\n10\n{}\n20\n{}\n30\n0.0\n11\n{}\n21\n{}\n31\n0.0\n", layer, fixed(p.x(), 6),
+                 fixed(p.y(), 6), fixed(q.x(), 6), fixed(q.y(), 6));
 }
 }  // namespace
 
