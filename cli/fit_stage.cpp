@@ -7,6 +7,7 @@
 
 #include "core/atomic_file.h"
 #include "core/errors.h"
+#include "core/number_format.h"
 #include "postproc/apt.h"
 #include "postproc/tool_export.h"
 
@@ -25,6 +26,13 @@ PatchSpec unit_spec(const PatchJob& p, const Similarity& frame) {
   s.length = p.length_mm > 0 ? frame.length_to_unit(p.length_mm) : 0;
   for (const auto& l : p.lines_mm) s.lines.push_back({frame.to_unit(point(l, 0)), frame.to_unit(point(l, 1))});
   return s;
+}
+
+// The tool's meridian (z, r) in mm from the tip.
+std::vector<Eigen::Vector2d> tool_profile_mm(const Similarity& fr, const FitResult& r) {
+  std::vector<Eigen::Vector2d> profile;
+  for (const Eigen::Vector2d& zr : meridian(r.tool, r.rails.length)) profile.emplace_back(fr.length_to_mm(zr.x()), fr.length_to_mm(zr.y()));
+  return profile;
 }
 
 nlohmann::ordered_json vec_mm(const Eigen::Vector3d& v) { return {round_mm(v.x()), round_mm(v.y()), round_mm(v.z())}; }
@@ -141,7 +149,7 @@ std::vector<std::array<unsigned char, 3>> deviation_colors(const std::vector<dou
     if (!std::isfinite(d))
       c[i] = {170, 170, 170};
     else if (std::abs(d) <= tol)
-      c[i] = mix(green, green, 0);
+      c[i] = {60, 170, 80};  // green
     else
       c[i] = mix(green, d > 0 ? red : blue, (std::abs(d) - tol) / (3 * tol));
   }
@@ -194,19 +202,14 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
   tool["shape"] = to_string(r.tool.shape);
   tool["length"] = round_mm(L);
   auto& profile = tool["profile"] = nlohmann::ordered_json::array();
-  double rmin = INFINITY, rmax = 0;
-  for (const Eigen::Vector2d& zr : meridian(r.tool, r.rails.length)) {
-    profile.push_back({round_mm(fr.length_to_mm(zr.x())), round_mm(fr.length_to_mm(zr.y()))});
-    rmin = std::min(rmin, fr.length_to_mm(zr.y()));
-    rmax = std::max(rmax, fr.length_to_mm(zr.y()));
-  }
+  const std::vector<Eigen::Vector2d> meridian_mm = tool_profile_mm(fr, r);
+  for (const Eigen::Vector2d& zr : meridian_mm) profile.push_back({round_mm(zr.x()), round_mm(zr.y())});
   tool["profile_note"] = "meridian [z, r] in mm, z along the axis from the tool tip end (a) towards b";
-  tool["diameter_min"] = round_mm(2 * rmin);
-  tool["diameter_max"] = round_mm(2 * rmax);
-  if (r.tool.shape == ToolShape::Cone) {
-    const double d0 = fr.length_to_mm(r.tool.d(0)), d1 = fr.length_to_mm(r.tool.d(1));
-    tool["cone_half_angle_deg"] = std::round(std::atan2(d1 - d0, L) * 180 / M_PI * 1e6) / 1e6;
-  }
+  const ToolDimensions dims = tool_dimensions(meridian_mm);
+  tool["diameter_min"] = round_mm(dims.diameter_min_mm);
+  tool["diameter_max"] = round_mm(dims.diameter_max_mm);
+  // The cone of the meridian itself: spheres d(z) = d0 + k z envelope a cone of half angle asin(k).
+  if (r.tool.shape == ToolShape::Cone) tool["cone_half_angle_deg"] = std::round(dims.cone_half_angle_deg * 1e6) / 1e6 + 0.0;
   j["tool"] = tool;
   j["coverage"] = p.fit.coverage;
   j["tolerance_mm"] = job.tolerance_mm;
@@ -273,15 +276,12 @@ std::vector<std::string> write_patch_files(const std::filesystem::path& out, con
   const std::vector<double> design_dev = to_mm(ms.design_deviation);
   write_ply((out / (name + "-deviation.ply")).string(), f.surface.mesh, deviation_colors(design_dev, job.tolerance_mm),
             design_dev, "deviation_mm", "design surface vs patch " + name + "; " + tol);
+  const std::vector<Eigen::Vector2d> profile = tool_profile_mm(fr, p.fit.fit);
   write_file_atomically((out / (name + "-tool.csv")).string(), [&](std::ostream& o) {
     o << "# tool of patch " << name << ": meridian of a " << to_string(p.fit.fit.tool.shape)
       << " tool, mm, z along the axis from the tip end\nz_mm,r_mm\n";
-    for (const Eigen::Vector2d& zr : meridian(p.fit.fit.tool, p.fit.fit.rails.length))
-      o << fmt::format("{:.6f},{:.6f}\n", round_mm(fr.length_to_mm(zr.x())), round_mm(fr.length_to_mm(zr.y())));
+    for (const Eigen::Vector2d& zr : profile) o << fixed(zr.x(), 6) << ',' << fixed(zr.y(), 6) << '\n';
   });
-  std::vector<Eigen::Vector2d> profile;
-  for (const Eigen::Vector2d& zr : meridian(p.fit.fit.tool, p.fit.fit.rails.length))
-    profile.emplace_back(fr.length_to_mm(zr.x()), fr.length_to_mm(zr.y()));
   write_tool_dxf((out / (name + "-tool.dxf")).string(), profile,
                  fmt::format("patch {}, {} tool, length {:.3f} mm", name, to_string(p.fit.fit.tool.shape), p.assembly.cutter_length()));
   std::vector<std::string> files = {name + "-envelope.ply", name + "-deviation.ply", name + "-tool.csv", name + "-tool.dxf"};
