@@ -3,6 +3,7 @@
 #include <doctest/doctest.h>
 
 #include <Eigen/Geometry>
+#include <functional>
 #include <random>
 
 #include "core/machined_surface.h"
@@ -31,6 +32,19 @@ AxisLine perturbed(const Exact& ex, double t, std::mt19937& rng) {
   return {mid - 0.5 * d, mid + 0.5 * d};
 }
 
+// Runs `fit` on the exact envelope of every case (CAPTURE names it), with a fresh seeded generator.
+void for_each_case(const std::vector<Case>& cases,
+                   const std::function<void(const Case&, const Exact&, const SurfaceIndex&, std::mt19937&)>& fit) {
+  for (const auto& c : cases) {
+    const std::string name = std::string(c.motion) + " " + c.profile_name;
+    CAPTURE(name);
+    const Exact ex = exact_envelope(c.motion, c.profile);
+    const SurfaceIndex surface(ex.unit_mesh);
+    std::mt19937 rng(3);
+    fit(c, ex, surface, rng);
+  }
+}
+
 double profile_error_mm(const FitResult& r, const Exact& ex, const RadiusProfile& truth) {
   double worst = 0;
   for (double s = 0.1; s <= 0.9; s += 0.1) worst = std::max(worst, std::abs(ex.frame.length_to_mm(r.tool.d(s)) - truth.d(s)));
@@ -43,18 +57,13 @@ TEST_CASE("surface-driven fits of exact envelopes reach eps <= 1e-4 for every to
                                    {"arc", "cone", cone_profile(6, 9), ToolShape::Cone},
                                    {"twist", "barrel", barrel_profile(6, 1.5), ToolShape::General},
                                    {"helix", "spline", spline_profile({5.0, 6.5, 7.5, 6.5, 7.0, 8.5}), ToolShape::General}};
-  for (const auto& c : cases) {
-    const std::string name = std::string(c.motion) + " " + c.profile_name;
-    CAPTURE(name);
-    const Exact ex = exact_envelope(c.motion, c.profile);
-    const SurfaceIndex surface(ex.unit_mesh);
-    std::mt19937 rng(3);
+  for_each_case(cases, [](const Case& c, const Exact& ex, const SurfaceIndex& surface, std::mt19937& rng) {
     std::vector<AxisLine> lines;
     for (double t : {0.0, 0.25, 0.5, 0.75, 1.0}) lines.push_back(perturbed(ex, t, rng));
     FitOptions o;
     o.shape = c.shape;
     const FitResult r = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
-    MESSAGE(name << ": eps_ini " << r.eps_ini.max << " eps_opt " << r.eps_opt.max
+    MESSAGE((std::string(c.motion) + " " + c.profile_name) << ": eps_ini " << r.eps_ini.max << " eps_opt " << r.eps_opt.max
                      << " profile error " << profile_error_mm(r, ex, c.profile) << " mm");
     CHECK(r.eps_ini.max > 1e-3);
     CHECK(r.eps_opt.max <= 1e-4);
@@ -62,7 +71,7 @@ TEST_CASE("surface-driven fits of exact envelopes reach eps <= 1e-4 for every to
     // The radius is only weakly determined on nearly developable envelopes (see FitOptions::w_anchor):
     // it comes back within the 1% (1.3-1.6 mm) the lines were perturbed by.
     CHECK(profile_error_mm(r, ex, c.profile) < 1.2);
-  }
+  });
 }
 
 TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4") {
@@ -70,22 +79,17 @@ TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4") {
                                    {"s-curve", "cone", cone_profile(6, 9), ToolShape::Cone},
                                    {"helix", "barrel", barrel_profile(6, 1.5), ToolShape::General},
                                    {"helix", "spline", spline_profile({5.0, 6.5, 7.5, 6.5, 7.0, 8.5}), ToolShape::General}};
-  for (const auto& c : cases) {
-    const std::string name = std::string(c.motion) + " " + c.profile_name;
-    CAPTURE(name);
-    const Exact ex = exact_envelope(c.motion, c.profile);
-    const SurfaceIndex surface(ex.unit_mesh);
-    std::mt19937 rng(3);
+  for_each_case(cases, [](const Case& c, const Exact& ex, const SurfaceIndex& surface, std::mt19937& rng) {
     const AxisLine l = perturbed(ex, 0.5, rng);
     const ExploredLine best = explore_line(surface, l.a, l.b);
     const LineTrajectory tr = propagate_line(surface, best.a, best.b);
     FitOptions o;
     o.shape = c.shape;
     const FitResult r = optimize_motion(surface, rails_from_trajectory(tr, o), o);
-    MESSAGE(name << ": " << tr.a.size() << " positions, eps_ini " << r.eps_ini.max
+    MESSAGE((std::string(c.motion) + " " + c.profile_name) << ": " << tr.a.size() << " positions, eps_ini " << r.eps_ini.max
                      << " eps_opt " << r.eps_opt.max << " profile error " << profile_error_mm(r, ex, c.profile) << " mm");
     CHECK(r.eps_opt.max <= 1e-4);
-  }
+  });
 }
 
 TEST_CASE("the machined envelope of a fit covers the exact envelope within the tolerance") {
