@@ -25,10 +25,9 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kDeg = M_PI / 180;
 
-// A candidate joint solution at one pose: angles (NaN = free) and IK branch.
+// A candidate joint solution at one pose (its index is the IK branch): angles (NaN = free).
 struct Candidate {
   std::array<double, 2> deg;
-  int branch;
   int linear_ok = -1;  // 1/0: the linear joints are within limits (unwinding does not change them); -1: a free angle, check later
   std::string why;     // when linear_ok == 0
 };
@@ -97,7 +96,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     for (const RotarySolution& s : rotary_solutions(m, poses[i].axis)) {
-      Candidate c{s.deg, int(cand[i].size()), -1, {}};
+      Candidate c{s.deg, -1, {}};
       for (int k = 0; k < 2; ++k)
         if (s.free[k]) c.deg[k] = NAN, singular[i] = 1;
       if (!s.free[0] && !s.free[1])
