@@ -321,14 +321,26 @@ Joints programmed(const Machine& m, const Joints& joints, const ToolPose& pose) 
   return {pose.tip, joints.rotary};
 }
 
+ToolPose programmed_pose(const Machine& m, const Joints& programmed, double tool_length_mm) {
+  const ToolPose fk = forward(m, programmed, tool_length_mm);
+  if (!m.controller.tcp && !m.controller.linuxcnc_trt) return fk;
+  return {programmed.linear, fk.axis};
+}
+
 std::vector<BlockFeed> block_feeds(const Machine& m, const JointPath& path, double feed) {
   if (!(feed > 0)) throw InputError("feed: must be > 0 mm/min");
+  return block_feeds(m, path, std::vector<double>(path.joints.size(), feed));
+}
+
+std::vector<BlockFeed> block_feeds(const Machine& m, const JointPath& path, const std::vector<double>& feed) {
+  if (feed.size() != path.joints.size()) throw InputError("block_feeds: one feed per pose expected");
   std::vector<BlockFeed> out(path.joints.size());
   for (size_t i = 1; i < path.joints.size(); ++i) {
+    if (!(feed[i] > 0)) throw InputError(fmt::format("feed: must be > 0 mm/min (block {})", i));
     const Joints &a = path.joints[i - 1], &b = path.joints[i];
     BlockFeed& bf = out[i];
     const double dist = (path.poses[i].tip - path.poses[i - 1].tip).norm();
-    bf.minutes = dist / feed;
+    bf.minutes = dist / feed[i];
     for (int k = 0; k < 3; ++k) {
       const double need = std::abs(b.linear[k] - a.linear[k]) / m.linear[k].max_speed_mm_min;
       if (need > bf.minutes) bf.minutes = need, bf.limiting_axis = k;

@@ -49,6 +49,9 @@ void require_reachable(const JointPath& path, const std::vector<ToolPose>& poses
 // What a program states for a pose: with TCP (G43.4, TCPM, TRAORI, LinuxCNC trt kinematics) the tip
 // in part coordinates and the rotary angles; without, the machine joints.
 [[nodiscard]] Joints programmed(const Machine& m, const Joints& joints, const ToolPose& pose);
+// The pose a program's values stand for (the inverse of `programmed`): forward kinematics of the
+// joints, or with TCP the tip as written and the axis the rotary angles give.
+[[nodiscard]] ToolPose programmed_pose(const Machine& m, const Joints& programmed, double tool_length_mm);
 
 struct BlockFeed {
   double minutes = 0;       // duration of the block (from the previous pose)
@@ -59,5 +62,8 @@ struct BlockFeed {
 // Per block i (pose i-1 -> i; entry 0 is empty): time at the programmed tip feed, stretched where an
 // axis would exceed its maximum speed.
 [[nodiscard]] std::vector<BlockFeed> block_feeds(const Machine& m, const JointPath& path, double feed_mm_min);
+// Same with a programmed feed per block (entry i for the block ending at pose i; entry 0 unused).
+[[nodiscard]] std::vector<BlockFeed> block_feeds(const Machine& m, const JointPath& path,
+                                                 const std::vector<double>& feed_mm_min);
 
 }  // namespace flankcam

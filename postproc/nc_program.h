@@ -1,0 +1,96 @@
+// One model of an NC program, shared by every G-code dialect: blocks of motion (programmed joint
+// values or tip + angles, with feed), tool change, spindle, coolant and comments. `post` builds it
+// from APT CL-data through a machine's kinematics; the emitters (postproc/gcode.h) only format it.
+#pragma once
+#include <array>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "kinematics/path.h"
+#include "postproc/apt.h"
+
+namespace flankcam {
+
+enum class Dialect { Iso, LinuxCnc, Heidenhain, Sinumerik };
+[[nodiscard]] std::string to_string(Dialect d);
+// "iso" (also "fanuc"), "linuxcnc", "heidenhain", "sinumerik"; throws InputError otherwise.
+[[nodiscard]] Dialect parse_dialect(const std::string& name);
+[[nodiscard]] std::string file_extension(Dialect d);  // ".nc", ".ngc", ".h", ".mpf"
+
+struct NcComment {
+  std::string text;
+};
+struct NcToolChange {
+  int number = 1;
+  std::string name;
+  double diameter_mm = 0, length_mm = 0;  // the cutter, for the comment and the tool table
+};
+struct NcSpindle {
+  double rpm = 0;  // 0: stop
+  bool clockwise = true;
+};
+struct NcCoolant {
+  bool on = true;
+};
+// Programmed axes of a move, in the order X Y Z, first rotary, second rotary.
+enum NcAxis : unsigned { AxisX = 1, AxisY = 2, AxisZ = 4, AxisR1 = 8, AxisR2 = 16, AxesLinear = 7, AxesRotary = 24, AxesAll = 31 };
+struct NcMove {
+  bool rapid = false;
+  unsigned axes = AxesAll;  // the words this block writes (rapids of the safe approach move some)
+  Joints at;                // programmed values: machine joints, or tip + angles under TCP
+  ToolPose pose;            // the intended pose at the end of the block (part frame)
+  double feed_mm_min = 0;   // G94 F: tip feed under TCP, else the feed of the linear axes' path
+  double inverse_time = 0;  // G93 F: 1 / block minutes
+  int cl_move = -1;         // index of the CL move it ends at; -1: inserted by linearisation or the approach
+};
+using NcBlock = std::variant<NcComment, NcToolChange, NcSpindle, NcCoolant, NcMove>;
+
+struct NcProgram {
+  std::string name;                  // program name (patch)
+  int number = 1;                    // program number (Fanuc O-number)
+  std::vector<std::string> header;   // comments after the program start
+  std::string machine;               // machine name
+  std::array<std::string, 2> rotary_names{"A", "C"};
+  bool tcp = false;                  // programmed values are tip + angles (G43.4, TCPM, TRAORI, LinuxCNC trt)
+  bool inverse_time = true;          // G93 for the feed moves
+  double safe_z = 0;                 // programmed Z of the safe height: rotaries turn only up there
+  std::vector<NcBlock> blocks;
+};
+
+struct PostOptions {
+  Dialect dialect = Dialect::Iso;
+  bool line_numbers = false;         // N words (Heidenhain always numbers its blocks)
+  PathOptions path;                  // kinematics: tool length, linearisation tolerances
+  double max_inverse_time = 99999.999;  // controller's largest G93 F; shorter blocks are slowed to it
+  double safe_height_mm = 10;        // safe Z above the highest clearance point of the program
+  std::string validate() const;      // empty when valid
+};
+
+// One tool's CL-data and what the program needs to know about the tool.
+struct PostInput {
+  ClProgram cl;
+  std::string patch;  // for messages: "patch 'NAME': pose I ... out of reach"
+  double tool_length_mm = 0;  // spindle nose to tip (head axes); 0: PostOptions::path.tool_length_mm
+};
+
+struct PostedSection {
+  std::string patch;
+  JointPath path;      // the solved, linearised motion (every pose, input and inserted)
+  int first_block = 0, end_block = 0;  // this section's blocks in NcProgram::blocks
+  int slowed_blocks = 0;  // blocks stretched by an axis speed or the inverse-time limit
+};
+struct Posted {
+  NcProgram program;
+  std::vector<PostedSection> sections;
+};
+
+// Builds the program for one or several CL programs in order (a tool change for each new tool):
+// IK along each whole CL program (one branch per path), linearisation of feed moves, inverse-time
+// feeds stretched by the axis speeds, a safe approach for every rapid that changes the orientation
+// (safe Z, rotaries, X Y, Z) and a retract to safe Z at the end. Throws MachineError naming the
+// patch and pose when a pose is out of reach.
+[[nodiscard]] Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o,
+                          const std::string& name, const std::vector<std::string>& header);
+
+}  // namespace flankcam
