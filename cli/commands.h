@@ -9,5 +9,6 @@ namespace flankcam::cli {
 using Run = std::function<int()>;
 Run add_envelope_command(CLI::App& app);
 Run add_fit_command(CLI::App& app);
+Run add_post_command(CLI::App& app);
 
 }  // namespace flankcam::cli

@@ -1,5 +1,6 @@
 #include "postproc/tool_export.h"
 
+#include <Eigen/Geometry>
 #include <fmt/format.h>
 
 #include <cmath>
@@ -48,6 +49,42 @@ std::string tool_dxf(const std::vector<Eigen::Vector2d>& p, const std::string& t
 
 void write_tool_dxf(const std::string& path, const std::vector<Eigen::Vector2d>& p, const std::string& title) {
   const std::string text = tool_dxf(p, title);
+  write_file_atomically(path, [&](std::ostream& out) { out << text; });
+}
+
+std::string tool_stl(const std::vector<Eigen::Vector2d>& p, const std::string& title, int segments) {
+  if (p.size() < 2) throw InputError("tool profile: at least two points needed");
+  if (segments < 3) throw InputError("tool_stl: at least 3 segments");
+  const auto at = [&](const Eigen::Vector2d& zr, int k) {
+    const double a = 2 * M_PI * (k % segments) / segments;
+    return Eigen::Vector3d(zr.y() * std::cos(a), zr.y() * std::sin(a), zr.x());
+  };
+  std::string out = "solid " + title + "\n";
+  const auto facet = [&](const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
+    const Eigen::Vector3d n = (b - a).cross(c - a);
+    if (n.norm() < 1e-12) return;  // a sliver where the profile touches the axis
+    const Eigen::Vector3d u = n.normalized();
+    out += "facet normal " + fixed(u.x(), 6) + " " + fixed(u.y(), 6) + " " + fixed(u.z(), 6) + "\n outer loop\n";
+    for (const Eigen::Vector3d* v : {&a, &b, &c})
+      out += "  vertex " + fixed(v->x(), 6) + " " + fixed(v->y(), 6) + " " + fixed(v->z(), 6) + "\n";
+    out += " endloop\nendfacet\n";
+  };
+  for (int k = 0; k < segments; ++k) {
+    // Side: outward normals (counter-clockwise seen from outside).
+    for (size_t i = 0; i + 1 < p.size(); ++i) {
+      facet(at(p[i], k), at(p[i], k + 1), at(p[i + 1], k + 1));
+      facet(at(p[i], k), at(p[i + 1], k + 1), at(p[i + 1], k));
+    }
+    // End faces: the tip face looks down, the far face up.
+    const Eigen::Vector3d tip_centre(0, 0, p.front().x()), far_centre(0, 0, p.back().x());
+    facet(tip_centre, at(p.front(), k + 1), at(p.front(), k));
+    facet(far_centre, at(p.back(), k), at(p.back(), k + 1));
+  }
+  return out + "endsolid " + title + "\n";
+}
+
+void write_tool_stl(const std::string& path, const std::vector<Eigen::Vector2d>& p, const std::string& title) {
+  const std::string text = tool_stl(p, title);
   write_file_atomically(path, [&](std::ostream& out) { out << text; });
 }
 

@@ -20,4 +20,9 @@ struct ToolDimensions {
 [[nodiscard]] std::string tool_dxf(const std::vector<Eigen::Vector2d>& profile, const std::string& title);
 void write_tool_dxf(const std::string& path, const std::vector<Eigen::Vector2d>& profile, const std::string& title);
 
+// The tool as a closed solid for simulators (ASCII STL, mm): the meridian revolved about +Z with
+// `segments` facets around, tip at the origin, end faces capped. Chordal error r (1 - cos(pi/segments)).
+[[nodiscard]] std::string tool_stl(const std::vector<Eigen::Vector2d>& profile, const std::string& title, int segments = 180);
+void write_tool_stl(const std::string& path, const std::vector<Eigen::Vector2d>& profile, const std::string& title);
+
 }  // namespace flankcam

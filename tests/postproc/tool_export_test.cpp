@@ -2,6 +2,10 @@
 
 #include <doctest/doctest.h>
 
+#include <Eigen/Geometry>
+#include <map>
+#include <sstream>
+
 #include <map>
 #include <sstream>
 
@@ -63,4 +67,38 @@ TEST_CASE("tool DXF (R12): the profile read back within 1 µm, connected, closed
   CHECK(d.length_mm == doctest::Approx(40.3));
   CHECK(d.diameter_max_mm > d.diameter_min_mm);
   CHECK(d.diameter_min_mm == doctest::Approx(2 * profile.front().y()));
+}
+
+TEST_CASE("tool STL for simulators: a closed, outward solid with the frustum's volume") {
+  // Cone tool r 6 -> 9 over 40 mm: V = pi h (r1^2 + r1 r2 + r2^2) / 3, times n sin(2 pi / n) / (2 pi) for n facets.
+  std::vector<Eigen::Vector2d> profile;
+  for (int k = 0; k <= 4; ++k) profile.emplace_back(10.0 * k, 6 + 0.75 * k);
+  const int n = 180;
+  const std::string text = tool_stl(profile, "cone");
+  std::istringstream in(text);
+  std::string word;
+  std::vector<Eigen::Vector3d> v;
+  while (in >> word)
+    if (word == "vertex") {
+      Eigen::Vector3d p;
+      in >> p.x() >> p.y() >> p.z();
+      v.push_back(p);
+    }
+  REQUIRE(v.size() % 3 == 0);
+  CHECK(v.size() / 3 == size_t(n) * (2 * 4 + 2));
+  double volume = 0;  // divergence theorem: sum of signed tetrahedra from the origin
+  std::map<std::pair<std::array<long, 3>, std::array<long, 3>>, int> edges;
+  const auto key = [](const Eigen::Vector3d& p) {
+    return std::array<long, 3>{std::lround(p.x() * 1e5), std::lround(p.y() * 1e5), std::lround(p.z() * 1e5)};
+  };
+  for (size_t f = 0; f < v.size(); f += 3) {
+    volume += v[f].dot(v[f + 1].cross(v[f + 2])) / 6;
+    for (int e = 0; e < 3; ++e) ++edges[{key(v[f + size_t(e)]), key(v[f + size_t((e + 1) % 3)])}];
+  }
+  const double exact = M_PI * 40 * (36 + 54 + 81) / 3 * n * std::sin(2 * M_PI / n) / (2 * M_PI);
+  CHECK(volume == doctest::Approx(exact).epsilon(1e-5));
+  // Closed and consistently oriented: every directed edge once, its reverse once.
+  int bad = 0;
+  for (const auto& [e, count] : edges) bad += count != 1 || !edges.count({e.second, e.first});
+  CHECK(bad == 0);
 }

@@ -1,0 +1,43 @@
+// The post-processing stage, shared by `flankcam post` (APT from any source) and `flankcam run`:
+// find the machine, post every CL program through its kinematics and write one NC program per
+// patch and dialect, plus one that runs all patches in order.
+#pragma once
+#include <array>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "kinematics/machine.h"
+#include "postproc/nc_program.h"
+
+namespace flankcam::cli {
+
+// A machine by file path, or by name among the shipped machines/ (e.g. "xyzac-trt"). Throws
+// InputError naming the shipped ones when neither exists.
+[[nodiscard]] Machine find_machine(const std::string& name_or_path, const std::filesystem::path& relative_to = {});
+
+struct PostSettings {
+  std::vector<Dialect> dialects;  // empty: the machine's own
+  bool line_numbers = false;
+  PostOptions options;            // dialect is set per program
+};
+
+struct WrittenProgram {
+  std::string file, patch;        // patch "" for the all-patches program
+  Dialect dialect = Dialect::Iso;
+  int moves = 0, inserted = 0, slowed = 0, singular = 0, branch_changes = 0;
+  std::array<std::array<double, 2>, 2> rotary_range{};  // min, max degrees per rotary axis
+  double minutes = 0;             // feed time of the cut moves
+};
+
+// Posts `inputs` (one per patch, in order) and writes PATCH.EXT for each and, with more than one,
+// ALL_NAME.EXT. `header`: comment lines at the top of every program. Nothing is written when any
+// patch fails (out of reach): the kinematics of all of them are solved first.
+[[nodiscard]] std::vector<WrittenProgram> write_programs(const std::filesystem::path& out, const Machine& m,
+                                                         const std::vector<PostInput>& inputs, const std::string& all_name,
+                                                         const PostSettings& settings, const std::vector<std::string>& header);
+
+[[nodiscard]] nlohmann::ordered_json program_report(const WrittenProgram& w, const Machine& m);
+
+}  // namespace flankcam::cli
