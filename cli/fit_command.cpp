@@ -42,7 +42,7 @@ int run_fit(const FitArgs& args) {
   for (const FittedPatch& p : fitted.patches) {
     nlohmann::ordered_json entry = patch_report(job, fitted, p);
     // A colliding motion gets no CL-data unless allowed.
-    const std::vector<std::string> files = write_patch_files(out, job, fitted, p, p.collisions.clear() || args.allow_collisions);
+    const std::vector<std::string> files = write_patch_files(out, job, fitted, p, {p.collisions.clear() || args.allow_collisions});
     entry["files"] = files;
     patches.push_back(entry);
     fmt::print("{:<16} {:<6} {:<9} {:>10.2e} {:>10.4f} {:>8.1f}%  {}\n", p.job->name, to_string(p.job->init),

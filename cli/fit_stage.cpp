@@ -9,6 +9,7 @@
 #include "core/errors.h"
 #include "core/number_format.h"
 #include "postproc/apt.h"
+#include "postproc/report_svg.h"
 #include "postproc/tool_export.h"
 
 namespace flankcam::cli {
@@ -137,22 +138,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
 
 std::vector<std::array<unsigned char, 3>> deviation_colors(const std::vector<double>& dev, double tol) {
   std::vector<std::array<unsigned char, 3>> c(dev.size());
-  const auto mix = [](std::array<double, 3> p, std::array<double, 3> q, double u) {
-    u = std::clamp(u, 0.0, 1.0);
-    return std::array<unsigned char, 3>{static_cast<unsigned char>(std::lround(p[0] + u * (q[0] - p[0]))),
-                                        static_cast<unsigned char>(std::lround(p[1] + u * (q[1] - p[1]))),
-                                        static_cast<unsigned char>(std::lround(p[2] + u * (q[2] - p[2])))};
-  };
-  const std::array<double, 3> green{60, 170, 80}, red{215, 40, 40}, blue{40, 80, 215};
-  for (size_t i = 0; i < dev.size(); ++i) {
-    const double d = dev[i];
-    if (!std::isfinite(d))
-      c[i] = {170, 170, 170};
-    else if (std::abs(d) <= tol)
-      c[i] = {60, 170, 80};  // green
-    else
-      c[i] = mix(green, d > 0 ? red : blue, (std::abs(d) - tol) / (3 * tol));
-  }
+  for (size_t i = 0; i < dev.size(); ++i) c[i] = deviation_color(dev[i], tol);
   return c;
 }
 
@@ -257,8 +243,18 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
   return j;
 }
 
+ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p, int tool) {
+  ClProgram cl = flank_program(p.job->name, p.poses, tool_profile_mm(f.frame, p.fit.fit), job.feed_mm_min, job.spindle_rpm,
+                               job.lead_in_mm, job.retract_mm);
+  cl.tool = tool;
+  cl.comments.push_back(fmt::format("FLANKCAM FIT OF {}, EPS {:.4f} MM, TOLERANCE {} MM", job.surface.filename().string(),
+                                    f.frame.length_to_mm(p.fit.fit.eps_opt.max), job.tolerance_mm));
+  if (!p.collisions.clear()) cl.comments.push_back("WARNING: COLLISIONS ALLOWED, SEE REPORT.JSON");
+  return cl;
+}
+
 std::vector<std::string> write_patch_files(const std::filesystem::path& out, const Job& job, const FittedJob& f,
-                                           const FittedPatch& p, bool program) {
+                                           const FittedPatch& p, const PatchOutputs& what) {
   const Similarity& fr = f.frame;
   const std::string& name = p.job->name;
   const MachinedSurface& ms = p.fit.machined;
@@ -276,24 +272,27 @@ std::vector<std::string> write_patch_files(const std::filesystem::path& out, con
   const std::vector<double> design_dev = to_mm(ms.design_deviation);
   write_ply((out / (name + "-deviation.ply")).string(), f.surface.mesh, deviation_colors(design_dev, job.tolerance_mm),
             design_dev, "deviation_mm", "design surface vs patch " + name + "; " + tol);
+  std::vector<std::string> files = {name + "-envelope.ply", name + "-deviation.ply"};
   const std::vector<Eigen::Vector2d> profile = tool_profile_mm(fr, p.fit.fit);
-  write_file_atomically((out / (name + "-tool.csv")).string(), [&](std::ostream& o) {
-    o << "# tool of patch " << name << ": meridian of a " << to_string(p.fit.fit.tool.shape)
-      << " tool, mm, z along the axis from the tip end\nz_mm,r_mm\n";
-    for (const Eigen::Vector2d& zr : profile) o << fixed(zr.x(), 6) << ',' << fixed(zr.y(), 6) << '\n';
-  });
-  write_tool_dxf((out / (name + "-tool.dxf")).string(), profile,
-                 fmt::format("patch {}, {} tool, length {:.3f} mm", name, to_string(p.fit.fit.tool.shape), p.assembly.cutter_length()));
-  std::vector<std::string> files = {name + "-envelope.ply", name + "-deviation.ply", name + "-tool.csv", name + "-tool.dxf"};
-  if (program) {
-    ClProgram cl = flank_program(name, p.poses, profile, job.feed_mm_min, job.spindle_rpm, job.lead_in_mm, job.retract_mm);
-    cl.comments.push_back(fmt::format("FLANKCAM FIT OF {}, EPS {:.4f} MM, TOLERANCE {} MM", job.surface.filename().string(),
-                                      f.frame.length_to_mm(p.fit.fit.eps_opt.max), job.tolerance_mm));
-    if (!p.collisions.clear()) cl.comments.push_back("WARNING: COLLISIONS ALLOWED, SEE REPORT.JSON");
-    write_apt((out / (name + ".apt")).string(), cl);
-    write_file_atomically((out / (name + "-cl.csv")).string(), [&](std::ostream& o) { o << cl_csv(cl); });
-    files.push_back(name + ".apt");
-    files.push_back(name + "-cl.csv");
+  if (what.tool) {
+    write_file_atomically((out / (name + "-tool.csv")).string(), [&](std::ostream& o) {
+      o << "# tool of patch " << name << ": meridian of a " << to_string(p.fit.fit.tool.shape)
+        << " tool, mm, z along the axis from the tip end\nz_mm,r_mm\n";
+      for (const Eigen::Vector2d& zr : profile) o << fixed(zr.x(), 6) << ',' << fixed(zr.y(), 6) << '\n';
+    });
+    const std::string title =
+        fmt::format("patch {}, {} tool, length {:.3f} mm", name, to_string(p.fit.fit.tool.shape), p.assembly.cutter_length());
+    write_tool_dxf((out / (name + "-tool.dxf")).string(), profile, title);
+    write_tool_stl((out / (name + "-tool.stl")).string(), profile, title);
+    files.insert(files.end(), {name + "-tool.csv", name + "-tool.dxf", name + "-tool.stl"});
+  }
+  if (what.program && (what.apt || what.cl)) {
+    const ClProgram cl = patch_program(job, f, p, what.tool_number);
+    if (what.apt) write_apt((out / (name + ".apt")).string(), cl), files.push_back(name + ".apt");
+    if (what.cl) {
+      write_file_atomically((out / (name + "-cl.csv")).string(), [&](std::ostream& o) { o << cl_csv(cl); });
+      files.push_back(name + "-cl.csv");
+    }
   }
   if (!p.collisions.clear()) {
     TriMesh all;

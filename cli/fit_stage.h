@@ -12,6 +12,7 @@
 #include "core/mesh.h"
 #include "core/collision.h"
 #include "core/patch.h"
+#include "postproc/apt.h"
 
 namespace flankcam::cli {
 
@@ -34,8 +35,7 @@ struct FittedJob {
 
 [[nodiscard]] FittedJob fit_job(const Job& job, int threads, const Progress& progress);
 
-// Deviation colours: green within the tolerance, red for undercut (material left, > 0),
-// blue for overcut (< 0), saturated at 4x the tolerance; grey where undefined (NaN).
+// Per-vertex deviation colours (postproc's deviation_color).
 [[nodiscard]] std::vector<std::array<unsigned char, 3>> deviation_colors(const std::vector<double>& dev_mm, double tol_mm);
 
 // Rounds a length in mm to 1 nm for reports (stable text, no spurious digits).
@@ -48,12 +48,20 @@ struct FittedJob {
 // One line per collision interval: "patch P: holder collides at poses 12-17, 0.731 mm deep at (x, y, z)".
 [[nodiscard]] std::vector<std::string> collision_summary(const FittedPatch& patch);
 
+// The patch's CL-data (APT model): approach, the fitted poses at the job's feed, retract; the tool's
+// meridian in mm; a comment with the fitted error and one flagging allowed collisions.
+[[nodiscard]] ClProgram patch_program(const Job& job, const FittedJob& fitted, const FittedPatch& patch, int tool);
+
+struct PatchOutputs {
+  bool program = true;       // CL-data at all (false for a colliding patch unless collisions are allowed)
+  bool apt = true, cl = true, tool = true;
+  int tool_number = 1;
+};
 // Files of a fitted patch in `out`: NAME-envelope.ply (Ω with its deviation from Φ), NAME-deviation.ply
-// (Φ with its deviation from Ω), NAME-tool.csv (meridian z, r in mm) and, when it collides,
+// (Φ with its deviation from Ω); with `tool`, NAME-tool.csv (meridian z, r in mm), NAME-tool.dxf and
+// NAME-tool.stl; with `program`, NAME.apt (APT CL-data) and NAME-cl.csv; when it collides,
 // NAME-collisions.obj (the assembly at the worst pose of each interval). Returns the file names.
-// With `program`, also NAME.apt (APT CL-data) and NAME-cl.csv (CL-data), flagged in a comment when
-// the patch collides; NAME-tool.dxf always.
 std::vector<std::string> write_patch_files(const std::filesystem::path& out, const Job& job, const FittedJob& fitted,
-                                           const FittedPatch& patch, bool program);
+                                           const FittedPatch& patch, const PatchOutputs& what);
 
 }  // namespace flankcam::cli

@@ -9,6 +9,7 @@
 
 #include "core/errors.h"
 #include "core/yaml_fields.h"
+#include "postproc/nc_program.h"
 
 namespace flankcam::cli {
 
@@ -69,6 +70,32 @@ PatchJob read_patch(const Reader& r, const YAML::Node& p, const std::string& key
   return job;
 }
 
+void read_post(const Reader& r, const YAML::Node& p, PostJob& post) {
+  r.only_keys(p, "post", {"dialects", "apt", "cl", "tool", "line_numbers", "tolerance", "angle_tolerance", "tool_length",
+                          "safe_height"});
+  if (const YAML::Node d = p["dialects"]) {
+    if (!d.IsSequence() || d.size() == 0) r.fail(d, "post.dialects", "expected a list such as [linuxcnc, iso]");
+    for (size_t k = 0; k < d.size(); ++k) {
+      const std::string key = fmt::format("post.dialects[{}]", k);
+      const std::string name = r.text(d[k], key);
+      try {
+        (void)parse_dialect(name);
+      } catch (const InputError& e) {
+        r.fail(d[k], key, e.what());
+      }
+      post.dialects.push_back(name);
+    }
+  }
+  if (p["apt"]) post.apt = r.boolean(p["apt"], "post.apt");
+  if (p["cl"]) post.cl = r.boolean(p["cl"], "post.cl");
+  if (p["tool"]) post.tool = r.boolean(p["tool"], "post.tool");
+  if (p["line_numbers"]) post.line_numbers = r.boolean(p["line_numbers"], "post.line_numbers");
+  if (p["tolerance"]) post.tolerance_mm = r.positive(p["tolerance"], "post.tolerance");
+  if (p["angle_tolerance"]) post.angle_tolerance_deg = r.positive(p["angle_tolerance"], "post.angle_tolerance");
+  if (p["tool_length"]) post.tool_length_mm = r.positive(p["tool_length"], "post.tool_length");
+  if (p["safe_height"]) post.safe_height_mm = r.non_negative(p["safe_height"], "post.safe_height");
+}
+
 }  // namespace
 
 Job read_job(const std::filesystem::path& file) {
@@ -77,7 +104,7 @@ Job read_job(const std::filesystem::path& file) {
   const Reader r(name);
   const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
-  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches"});
+  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "machine", "post"});
 
   Job job;
   job.file = file;
@@ -139,6 +166,8 @@ Job read_job(const std::filesystem::path& file) {
     if (f["robust"]) job.robust_mm = r.non_negative(f["robust"], "fit.robust");
   }
   if (auto err = job.fit.validate(); !err.empty()) throw InputError(name + ": " + err);
+  if (root["machine"]) job.machine = r.text(root["machine"], "machine");
+  if (const YAML::Node p = root["post"]) read_post(r, p, job.post);
 
   const YAML::Node ps = root["patches"];
   if (!ps) throw InputError(name + ": patches: missing (at least one patch with its initialisation)");

@@ -27,6 +27,17 @@ struct HolderJob {
   double length = 0, diameter = 0, diameter_far = 0, cylinder_length = 0;
 };
 
+// `flankcam run`: what to write for the machine (all lengths mm).
+struct PostJob {
+  std::vector<std::string> dialects;   // empty: the machine's own dialect
+  bool apt = true, cl = true, tool = true;  // APT CL-data, CL CSV, tool DXF/CSV/STL
+  bool line_numbers = false;
+  double tolerance_mm = 0.005;         // linearisation: tip off the intended motion
+  double angle_tolerance_deg = 0.05;   // linearisation: axis off the intended motion
+  double tool_length_mm = 0;           // spindle nose to tip; 0: holder + shank + cutter lengths
+  double safe_height_mm = 10;          // safe Z above the highest programmed point
+};
+
 struct Job {
   std::filesystem::path file;     // the job file itself
   std::filesystem::path surface;  // resolved against the job file's folder
@@ -39,6 +50,8 @@ struct Job {
   std::optional<double> robust_mm;  // Cauchy scale of the fit; unset: FitOptions' relative default
   FitOptions fit;                   // sampling, weights, shape, iterations (unit-free parts)
   std::vector<PatchJob> patches;
+  std::string machine;  // `run`: a machine file (relative to the job file) or a name in machines/
+  PostJob post;
 };
 
 // Throws InputError "FILE:LINE: KEY: what is wrong" for unknown keys, wrong types, bad values,

@@ -1,0 +1,282 @@
+#include "postproc/report_svg.h"
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "core/number_format.h"
+
+namespace flankcam {
+
+std::array<unsigned char, 3> deviation_color(double d, double tol) {
+  const std::array<double, 3> green{60, 170, 80}, red{215, 40, 40}, blue{40, 80, 215};
+  if (!std::isfinite(d)) return {170, 170, 170};
+  if (std::abs(d) <= tol) return {60, 170, 80};
+  const double u = std::clamp((std::abs(d) - tol) / (3 * tol), 0.0, 1.0);
+  const std::array<double, 3>& q = d > 0 ? red : blue;
+  std::array<unsigned char, 3> c{};
+  for (size_t k = 0; k < 3; ++k) c[k] = static_cast<unsigned char>(std::lround(green[k] + u * (q[k] - green[k])));
+  return c;
+}
+
+namespace {
+
+std::string num(double x) { return fixed(x, 2); }
+std::string hex(const std::array<unsigned char, 3>& c) { return fmt::format("#{:02x}{:02x}{:02x}", c[0], c[1], c[2]); }
+std::string escape(const std::string& s) {
+  std::string out;
+  for (char c : s) out += c == '<' ? "&lt;" : c == '>' ? "&gt;" : c == '&' ? "&amp;" : std::string(1, c);
+  return out;
+}
+std::string header(double w, double h) {
+  return fmt::format(R"(<svg xmlns="http://www.w3.org/2000/svg" width="{0}" height="{1}" viewBox="0 0 {0} {1}" )"
+                     R"(font-family="sans-serif" font-size="12">)"
+                     "\n",
+                     num(w), num(h));
+}
+std::string text(double x, double y, const std::string& s, const std::string& extra = "") {
+  return fmt::format(R"(<text x="{}" y="{}"{}>{}</text>)"
+                     "\n",
+                     num(x), num(y), extra.empty() ? "" : " " + extra, escape(s));
+}
+std::string line(double x0, double y0, double x1, double y1, const std::string& style) {
+  return fmt::format(R"(<line x1="{}" y1="{}" x2="{}" y2="{}" {}/>)"
+                     "\n",
+                     num(x0), num(y0), num(x1), num(y1), style);
+}
+// A nice step for about `n` ticks over `span`.
+double tick_step(double span, int n) {
+  const double raw = span / n, p = std::pow(10.0, std::floor(std::log10(raw)));
+  for (double m : {1.0, 2.0, 5.0, 10.0})
+    if (m * p >= raw) return m * p;
+  return 10 * p;
+}
+
+}  // namespace
+
+std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& dev, double tol,
+                              const std::vector<ToolPose>& poses, const std::vector<Eigen::Vector2d>& profile,
+                              const std::string& title, int columns) {
+  // View along the area-weighted mean normal of the faces with a deviation (all faces if none).
+  Eigen::Vector3d normal = Eigen::Vector3d::Zero();
+  for (int pass = 0; pass < 2 && normal.norm() < 1e-12; ++pass)
+    for (const auto& f : mesh.faces) {
+      if (pass == 0 && !(std::isfinite(dev[size_t(f[0])]) && std::isfinite(dev[size_t(f[1])]) && std::isfinite(dev[size_t(f[2])])))
+        continue;
+      const Eigen::Vector3d &a = mesh.vertices[size_t(f[0])], &b = mesh.vertices[size_t(f[1])], &c = mesh.vertices[size_t(f[2])];
+      normal += (b - a).cross(c - a);
+    }
+  const Eigen::Vector3d v = normal.norm() > 1e-12 ? normal.normalized() : Eigen::Vector3d::UnitZ();
+  // Picture x along the surface's longest extent in the view plane.
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const auto& p : mesh.vertices) mean += p;
+  mean /= double(std::max<size_t>(1, mesh.vertices.size()));
+  Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+  const Eigen::Matrix3d flat = Eigen::Matrix3d::Identity() - v * v.transpose();
+  for (const auto& p : mesh.vertices) {
+    const Eigen::Vector3d q = flat * (p - mean);
+    cov += q * q.transpose();
+  }
+  Eigen::Vector3d u = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvectors().col(2);
+  if (u.dot(Eigen::Vector3d(1, 1, 1)) < 0) u = -u;  // a fixed sign: same input, same picture
+  const Eigen::Vector3d w = v.cross(u);
+  const auto project = [&](const Eigen::Vector3d& p) { return Eigen::Vector2d((p - mean).dot(u), (p - mean).dot(w)); };
+
+  Eigen::Vector2d lo(1e300, 1e300), hi(-1e300, -1e300);
+  for (const auto& p : mesh.vertices) lo = lo.cwiseMin(project(p)), hi = hi.cwiseMax(project(p));
+  const double cell = std::max(hi.x() - lo.x(), (hi.y() - lo.y()) * 0.75) / columns;
+  const int nx = std::max(1, int(std::ceil((hi.x() - lo.x()) / cell))), ny = std::max(1, int(std::ceil((hi.y() - lo.y()) / cell)));
+  // Rasterise: per cell the value of the front-most face covering its centre.
+  std::vector<double> depth(size_t(nx * ny), -std::numeric_limits<double>::infinity());
+  std::vector<double> value(size_t(nx * ny), std::numeric_limits<double>::quiet_NaN());
+  std::vector<bool> covered(size_t(nx * ny), false);
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector2d a = project(mesh.vertices[size_t(f[0])]), b = project(mesh.vertices[size_t(f[1])]),
+                          c = project(mesh.vertices[size_t(f[2])]);
+    const double area = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
+    if (std::abs(area) < 1e-300) continue;
+    const int x0 = std::max(0, int((std::min({a.x(), b.x(), c.x()}) - lo.x()) / cell - 0.5));
+    const int x1 = std::min(nx - 1, int((std::max({a.x(), b.x(), c.x()}) - lo.x()) / cell + 0.5));
+    const int y0 = std::max(0, int((std::min({a.y(), b.y(), c.y()}) - lo.y()) / cell - 0.5));
+    const int y1 = std::min(ny - 1, int((std::max({a.y(), b.y(), c.y()}) - lo.y()) / cell + 0.5));
+    for (int iy = y0; iy <= y1; ++iy)
+      for (int ix = x0; ix <= x1; ++ix) {
+        const Eigen::Vector2d p = lo + cell * Eigen::Vector2d(ix + 0.5, iy + 0.5);
+        const double l1 = ((b - p).x() * (c - p).y() - (b - p).y() * (c - p).x()) / area;
+        const double l2 = ((c - p).x() * (a - p).y() - (c - p).y() * (a - p).x()) / area;
+        const double l3 = 1 - l1 - l2;
+        if (l1 < -1e-9 || l2 < -1e-9 || l3 < -1e-9) continue;
+        const double d = l1 * mesh.vertices[size_t(f[0])].dot(v) + l2 * mesh.vertices[size_t(f[1])].dot(v) +
+                         l3 * mesh.vertices[size_t(f[2])].dot(v);
+        const size_t k = size_t(iy * nx + ix);
+        if (d <= depth[k]) continue;
+        depth[k] = d;
+        covered[k] = true;
+        value[k] = l1 * dev[size_t(f[0])] + l2 * dev[size_t(f[1])] + l3 * dev[size_t(f[2])];
+      }
+  }
+
+  const double scale = 640.0 / (nx * cell), margin = 20, top = 36, legend = 60;
+  const double width = 640 + 2 * margin, height = top + ny * cell * scale + legend + margin;
+  const auto sx = [&](double x) { return margin + (x - lo.x()) * scale; };
+  const auto sy = [&](double y) { return top + (hi.y() - y) * scale; };
+  std::string s = header(width, height);
+  s += text(margin, 22, title, R"(font-size="14" font-weight="bold")");
+  s += R"(<g shape-rendering="crispEdges">)"
+       "\n";
+  for (int iy = 0; iy < ny; ++iy)
+    for (int ix = 0; ix < nx;) {
+      const size_t k = size_t(iy * nx + ix);
+      if (!covered[k]) {
+        ++ix;
+        continue;
+      }
+      const std::string colour = hex(deviation_color(value[k], tol));
+      int run = 1;
+      while (ix + run < nx && covered[k + size_t(run)] && hex(deviation_color(value[k + size_t(run)], tol)) == colour) ++run;
+      s += fmt::format(R"(<rect x="{}" y="{}" width="{}" height="{}" fill="{}"/>)"
+                       "\n",
+                       num(sx(lo.x() + ix * cell)), num(sy(lo.y() + (iy + 1) * cell)), num(run * cell * scale + 0.3),
+                       num(cell * scale + 0.3), colour);
+      ix += run;
+    }
+  s += "</g>\n";
+  // The tool at a few poses: its silhouette seen along v.
+  const size_t shown = std::min<size_t>(5, poses.size());
+  for (size_t i = 0; i < shown && profile.size() >= 2; ++i) {
+    const ToolPose& p = poses[shown == 1 ? 0 : i * (poses.size() - 1) / (shown - 1)];
+    const Eigen::Vector2d a2(p.axis.dot(u), p.axis.dot(w));
+    if (a2.norm() < 1e-6) continue;  // looking down the axis
+    const Eigen::Vector2d side = Eigen::Vector2d(-a2.y(), a2.x()).normalized();
+    std::string pts;
+    for (size_t k = 0; k < profile.size(); ++k) {
+      const Eigen::Vector2d q = project(p.tip + profile[k].x() * p.axis) + profile[k].y() * side;
+      pts += num(sx(q.x())) + "," + num(sy(q.y())) + " ";
+    }
+    for (size_t k = profile.size(); k-- > 0;) {
+      const Eigen::Vector2d q = project(p.tip + profile[k].x() * p.axis) - profile[k].y() * side;
+      pts += num(sx(q.x())) + "," + num(sy(q.y())) + " ";
+    }
+    pts.pop_back();
+    s += fmt::format(R"(<polygon points="{}" fill="#000000" fill-opacity="0.06" stroke="#222222" stroke-width="1"/>)"
+                     "\n",
+                     pts);
+    const Eigen::Vector2d t0 = project(p.tip), t1 = project(p.tip + profile.back().x() * p.axis);
+    s += line(sx(t0.x()), sy(t0.y()), sx(t1.x()), sy(t1.y()), R"(stroke="#222222" stroke-dasharray="6 3")");
+  }
+  // Legend: -4 tol .. +4 tol.
+  const double ly = height - legend + 10, lw = 320;
+  for (int k = 0; k < 64; ++k) {
+    const double d = (-4 + 8 * (k + 0.5) / 64) * tol;
+    s += fmt::format(R"(<rect x="{}" y="{}" width="{}" height="14" fill="{}"/>)"
+                     "\n",
+                     num(margin + k * lw / 64), num(ly), num(lw / 64 + 0.3), hex(deviation_color(d, tol)));
+  }
+  for (int k : {-4, -1, 0, 1, 4}) {
+    const double x = margin + (k + 4) * lw / 8;
+    s += line(x, ly + 14, x, ly + 18, R"(stroke="#000000")");
+    s += text(x, ly + 30, fixed(k * tol, 4), R"(text-anchor="middle" font-size="10")");
+  }
+  s += text(margin + lw + 12, ly + 11, "mm signed deviation: blue overcut, green within tolerance, red undercut");
+  s += fmt::format(R"(<rect x="{}" y="{}" width="14" height="14" fill="{}"/>)"
+                   "\n",
+                   num(margin + lw + 12), num(ly + 18), hex(deviation_color(NAN, tol)));
+  s += text(margin + lw + 32, ly + 30, "not reached by this patch");
+  return s + "</svg>\n";
+}
+
+std::string tool_profile_svg(const std::vector<Eigen::Vector2d>& profile, const std::string& title) {
+  const ToolDimensions dim = tool_dimensions(profile);
+  double r_max = 0;
+  for (const auto& q : profile) r_max = std::max(r_max, q.y());
+  const double len = std::max(dim.length_mm, 1e-9), z0 = profile.empty() ? 0 : profile.front().x();
+  const double draw_h = 360, scale = std::min(draw_h / len, 200 / std::max(r_max, 1e-9));
+  const double cx = 170, base = 40 + len * scale + 10;  // tip at the bottom
+  const auto px = [&](double r) { return cx + r * scale; };
+  const auto py = [&](double z) { return base - (z - z0) * scale; };
+  const double width = 460, height = base + 60;
+  std::string s = header(width, height);
+  s += text(10, 22, title, R"(font-size="14" font-weight="bold")");
+  std::string pts;
+  for (const auto& q : profile) pts += num(px(q.y())) + "," + num(py(q.x())) + " ";
+  for (size_t k = profile.size(); k-- > 0;) pts += num(px(-profile[k].y())) + "," + num(py(profile[k].x())) + " ";
+  if (!pts.empty()) pts.pop_back();
+  s += fmt::format(R"(<polygon points="{}" fill="#b8c4d6" stroke="#1f3b63" stroke-width="1.5"/>)"
+                   "\n",
+                   pts);
+  s += line(cx, py(z0) + 12, cx, py(z0 + len) - 12, R"(stroke="#555555" stroke-dasharray="10 3 2 3")");
+  const std::string dimension = R"(stroke="#000000" stroke-width="0.8")";
+  // Length at the right.
+  const double xr = px(r_max) + 30;
+  s += line(xr, py(z0), xr, py(z0 + len), dimension);
+  s += line(xr - 5, py(z0), xr + 5, py(z0), dimension) + line(xr - 5, py(z0 + len), xr + 5, py(z0 + len), dimension);
+  s += text(xr + 8, (py(z0) + py(z0 + len)) / 2, "L " + fixed(dim.length_mm, 3) + " mm");
+  // End diameters.
+  if (!profile.empty()) {
+    const double rt = profile.front().y(), re = profile.back().y();
+    s += line(px(-rt), py(z0) + 18, px(rt), py(z0) + 18, dimension);
+    s += text(cx, py(z0) + 34, "D " + fixed(2 * rt, 3) + " mm at the tip", R"(text-anchor="middle")");
+    s += line(px(-re), py(z0 + len) - 10, px(re), py(z0 + len) - 10, dimension);
+    s += text(cx, py(z0 + len) - 16, "D " + fixed(2 * re, 3) + " mm", R"(text-anchor="middle")");
+  }
+  s += text(xr + 8, py(z0 + len) + 16, "D min " + fixed(dim.diameter_min_mm, 3) + ", max " + fixed(dim.diameter_max_mm, 3));
+  if (dim.cone_half_angle_deg != 0)
+    s += text(xr + 8, py(z0 + len) + 32, "cone half-angle " + fixed(dim.cone_half_angle_deg, 3) + " deg");
+  return s + "</svg>\n";
+}
+
+std::string angle_chart_svg(const std::array<AngleSeries, 2>& series, const std::string& title) {
+  const double width = 680, height = 300, left = 60, right = 20, top = 40, bottom = 40;
+  double lo = 1e300, hi = -1e300;
+  size_t n = 0;
+  for (const auto& a : series) {
+    for (double d : a.deg) lo = std::min(lo, d), hi = std::max(hi, d);
+    n = std::max(n, a.deg.size());
+  }
+  if (n == 0) lo = 0, hi = 1;
+  const double pad = std::max(1.0, 0.08 * (hi - lo));
+  lo -= pad, hi += pad;
+  const auto px = [&](double i) { return left + (width - left - right) * (n > 1 ? i / double(n - 1) : 0.5); };
+  const auto py = [&](double d) { return top + (height - top - bottom) * (hi - d) / (hi - lo); };
+  std::string s = header(width, height);
+  s += text(10, 22, title, R"(font-size="14" font-weight="bold")");
+  const double step = tick_step(hi - lo, 6);
+  for (double t = std::ceil(lo / step) * step; t <= hi; t += step) {
+    s += line(left, py(t), width - right, py(t), R"(stroke="#dddddd")");
+    s += text(left - 6, py(t) + 4, fixed(t, step < 1 ? 1 : 0), R"(text-anchor="end" font-size="10")");
+  }
+  s += line(left, top, left, height - bottom, R"(stroke="#000000")");
+  s += line(left, height - bottom, width - right, height - bottom, R"(stroke="#000000")");
+  s += text((left + width - right) / 2, height - 10, "block of the program", R"(text-anchor="middle")");
+  s += text(14, (top + height - bottom) / 2, "deg", R"(text-anchor="middle")");
+  const std::array<std::string, 2> colour{"#c0392b", "#1f6fb2"};
+  for (size_t k = 0; k < 2; ++k) {
+    const AngleSeries& a = series[k];
+    std::string pts;
+    for (size_t i = 0; i < a.deg.size(); ++i) pts += num(px(double(i))) + "," + num(py(a.deg[i])) + " ";
+    if (!pts.empty()) pts.pop_back();
+    s += fmt::format(R"(<polyline points="{}" fill="none" stroke="{}" stroke-width="1.5"/>)"
+                     "\n",
+                     pts, colour[k]);
+    if (!a.continuous)
+      for (double limit : {a.min_deg, a.max_deg})
+        if (limit > lo && limit < hi) {
+          s += line(left, py(limit), width - right, py(limit), "stroke=\"" + colour[k] + R"(" stroke-dasharray="5 4")");
+          s += text(width - right - 4, py(limit) - 4, a.name + " limit " + fixed(limit, 1), R"(text-anchor="end" font-size="10")");
+        }
+    double mn = 1e300, mx = -1e300;
+    for (double d : a.deg) mn = std::min(mn, d), mx = std::max(mx, d);
+    s += fmt::format(R"(<rect x="{}" y="{}" width="14" height="4" fill="{}"/>)"
+                     "\n",
+                     num(left + 10 + 250 * double(k)), num(top - 12), colour[k]);
+    s += text(left + 30 + 250 * double(k), top - 7,
+              a.deg.empty() ? a.name : fmt::format("{}: {} .. {} deg", a.name, fixed(mn, 2), fixed(mx, 2)));
+  }
+  return s + "</svg>\n";
+}
+
+}  // namespace flankcam
