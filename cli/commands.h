@@ -10,5 +10,6 @@ using Run = std::function<int()>;
 Run add_envelope_command(CLI::App& app);
 Run add_fit_command(CLI::App& app);
 Run add_post_command(CLI::App& app);
+Run add_run_command(CLI::App& app);
 
 }  // namespace flankcam::cli

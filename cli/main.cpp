@@ -19,6 +19,7 @@ int main(int argc, char** argv) {
   register_command(&flankcam::cli::add_envelope_command);
   register_command(&flankcam::cli::add_fit_command);
   register_command(&flankcam::cli::add_post_command);
+  register_command(&flankcam::cli::add_run_command);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

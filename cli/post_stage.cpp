@@ -43,6 +43,7 @@ WrittenProgram summarize(const Posted& posted, const std::string& file, const st
   for (const NcBlock& b : posted.program.blocks)
     if (const auto* m = std::get_if<NcMove>(&b)) {
       ++w.moves;
+      for (size_t k = 0; k < 2; ++k) w.rotary_deg[k].push_back(m->at.rotary[k]);
       if (!m->rapid) w.minutes += 1 / m->inverse_time;
     }
   return w;

@@ -29,6 +29,7 @@ struct WrittenProgram {
   int moves = 0, inserted = 0, slowed = 0, singular = 0, branch_changes = 0;
   std::array<std::array<double, 2>, 2> rotary_range{};  // min, max degrees per rotary axis
   double minutes = 0;             // feed time of the cut moves
+  std::array<std::vector<double>, 2> rotary_deg;  // programmed angles per move (for the chart)
 };
 
 // Posts `inputs` (one per patch, in order) and writes PATCH.EXT for each and, with more than one,

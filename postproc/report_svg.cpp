@@ -181,11 +181,12 @@ std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& de
     s += line(x, ly + 14, x, ly + 18, R"(stroke="#000000")");
     s += text(x, ly + 30, fixed(k * tol, 4), R"(text-anchor="middle" font-size="10")");
   }
-  s += text(margin + lw + 12, ly + 11, "mm signed deviation: blue overcut, green within tolerance, red undercut");
+  s += text(margin + lw + 12, ly + 11, "signed deviation, mm: blue overcut,");
+  s += text(margin + lw + 12, ly + 25, "green within tolerance, red undercut");
   s += fmt::format(R"(<rect x="{}" y="{}" width="14" height="14" fill="{}"/>)"
                    "\n",
-                   num(margin + lw + 12), num(ly + 18), hex(deviation_color(NAN, tol)));
-  s += text(margin + lw + 32, ly + 30, "not reached by this patch");
+                   num(margin + lw + 12), num(ly + 30), hex(deviation_color(NAN, tol)));
+  s += text(margin + lw + 32, ly + 42, "not reached by this patch");
   return s + "</svg>\n";
 }
 
@@ -230,7 +231,7 @@ std::string tool_profile_svg(const std::vector<Eigen::Vector2d>& profile, const 
 }
 
 std::string angle_chart_svg(const std::array<AngleSeries, 2>& series, const std::string& title) {
-  const double width = 680, height = 300, left = 60, right = 20, top = 40, bottom = 40;
+  const double width = 680, height = 310, left = 60, right = 20, top = 56, bottom = 40;
   double lo = 1e300, hi = -1e300;
   size_t n = 0;
   for (const auto& a : series) {
@@ -272,8 +273,8 @@ std::string angle_chart_svg(const std::array<AngleSeries, 2>& series, const std:
     for (double d : a.deg) mn = std::min(mn, d), mx = std::max(mx, d);
     s += fmt::format(R"(<rect x="{}" y="{}" width="14" height="4" fill="{}"/>)"
                      "\n",
-                     num(left + 10 + 250 * double(k)), num(top - 12), colour[k]);
-    s += text(left + 30 + 250 * double(k), top - 7,
+                     num(left + 10 + 250 * double(k)), num(top - 22), colour[k]);
+    s += text(left + 30 + 250 * double(k), top - 17,
               a.deg.empty() ? a.name : fmt::format("{}: {} .. {} deg", a.name, fixed(mn, 2), fixed(mx, 2)));
   }
   return s + "</svg>\n";
