@@ -11,5 +11,6 @@ Run add_envelope_command(CLI::App& app);
 Run add_fit_command(CLI::App& app);
 Run add_post_command(CLI::App& app);
 Run add_run_command(CLI::App& app);
+Run add_blade_command(CLI::App& app);
 
 }  // namespace flankcam::cli

@@ -172,9 +172,17 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   // Backtrack.
   std::vector<int> pick(static_cast<size_t>(n));
   {
+    // Equal costs (mirror branches travel alike): the branch whose first rotary axis ends nearer the
+    // middle of its range, so that round-off in the poses never flips the choice.
+    const RotaryAxis& first = m.rotary[0];
+    const double mid = first.continuous ? 0 : 0.5 * (first.min_deg + first.max_deg);
+    const auto off_centre = [&](const State& s) { return std::abs(s.deg[0] - mid); };
     int best = 0;
-    for (size_t c = 1; c < st[n - 1].size(); ++c)
-      if (st[n - 1][c].cost < st[n - 1][best].cost) best = int(c);
+    for (size_t c = 1; c < st[n - 1].size(); ++c) {
+      const State &a = st[n - 1][c], &b = st[n - 1][size_t(best)];
+      const double tie = 1e-9 * std::max(1.0, std::abs(b.cost));
+      if (a.cost < b.cost - tie || (std::abs(a.cost - b.cost) <= tie && off_centre(a) < off_centre(b) - 1e-9)) best = int(c);
+    }
     for (int i = n - 1; i >= 0; --i) {
       pick[i] = best;
       best = st[i][best].from;

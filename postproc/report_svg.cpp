@@ -86,8 +86,25 @@ std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& de
   const Eigen::Vector3d w = v.cross(u);
   const auto project = [&](const Eigen::Vector3d& p) { return Eigen::Vector2d((p - mean).dot(u), (p - mean).dot(w)); };
 
+  // The tool at a few poses: its silhouette seen along v (outline, then the axis from tip to end).
+  std::vector<std::vector<Eigen::Vector2d>> outlines;
+  std::vector<std::array<Eigen::Vector2d, 2>> axes;
+  const size_t shown = std::min<size_t>(5, poses.size());
+  for (size_t i = 0; i < shown && profile.size() >= 2; ++i) {
+    const ToolPose& p = poses[shown == 1 ? 0 : i * (poses.size() - 1) / (shown - 1)];
+    const Eigen::Vector2d a2(p.axis.dot(u), p.axis.dot(w));
+    if (a2.norm() < 1e-6) continue;  // looking down the axis
+    const Eigen::Vector2d side = Eigen::Vector2d(-a2.y(), a2.x()).normalized();
+    std::vector<Eigen::Vector2d> outline;
+    for (size_t k = 0; k < profile.size(); ++k) outline.push_back(project(p.tip + profile[k].x() * p.axis) + profile[k].y() * side);
+    for (size_t k = profile.size(); k-- > 0;) outline.push_back(project(p.tip + profile[k].x() * p.axis) - profile[k].y() * side);
+    outlines.push_back(outline);
+    axes.push_back({project(p.tip), project(p.tip + profile.back().x() * p.axis)});
+  }
   Eigen::Vector2d lo(1e300, 1e300), hi(-1e300, -1e300);
   for (const auto& p : mesh.vertices) lo = lo.cwiseMin(project(p)), hi = hi.cwiseMax(project(p));
+  for (const auto& o : outlines)
+    for (const auto& q : o) lo = lo.cwiseMin(q), hi = hi.cwiseMax(q);
   const double cell = std::max(hi.x() - lo.x(), (hi.y() - lo.y()) * 0.75) / columns;
   const int nx = std::max(1, int(std::ceil((hi.x() - lo.x()) / cell))), ny = std::max(1, int(std::ceil((hi.y() - lo.y()) / cell)));
   // Rasterise: per cell the value of the front-most face covering its centre.
@@ -145,48 +162,35 @@ std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& de
       ix += run;
     }
   s += "</g>\n";
-  // The tool at a few poses: its silhouette seen along v.
-  const size_t shown = std::min<size_t>(5, poses.size());
-  for (size_t i = 0; i < shown && profile.size() >= 2; ++i) {
-    const ToolPose& p = poses[shown == 1 ? 0 : i * (poses.size() - 1) / (shown - 1)];
-    const Eigen::Vector2d a2(p.axis.dot(u), p.axis.dot(w));
-    if (a2.norm() < 1e-6) continue;  // looking down the axis
-    const Eigen::Vector2d side = Eigen::Vector2d(-a2.y(), a2.x()).normalized();
+  for (size_t i = 0; i < outlines.size(); ++i) {
     std::string pts;
-    for (size_t k = 0; k < profile.size(); ++k) {
-      const Eigen::Vector2d q = project(p.tip + profile[k].x() * p.axis) + profile[k].y() * side;
-      pts += num(sx(q.x())) + "," + num(sy(q.y())) + " ";
-    }
-    for (size_t k = profile.size(); k-- > 0;) {
-      const Eigen::Vector2d q = project(p.tip + profile[k].x() * p.axis) - profile[k].y() * side;
-      pts += num(sx(q.x())) + "," + num(sy(q.y())) + " ";
-    }
+    for (const auto& q : outlines[i]) pts += num(sx(q.x())) + "," + num(sy(q.y())) + " ";
     pts.pop_back();
     s += fmt::format(R"(<polygon points="{}" fill="#000000" fill-opacity="0.06" stroke="#222222" stroke-width="1"/>)"
                      "\n",
                      pts);
-    const Eigen::Vector2d t0 = project(p.tip), t1 = project(p.tip + profile.back().x() * p.axis);
-    s += line(sx(t0.x()), sy(t0.y()), sx(t1.x()), sy(t1.y()), R"(stroke="#222222" stroke-dasharray="6 3")");
+    s += line(sx(axes[i][0].x()), sy(axes[i][0].y()), sx(axes[i][1].x()), sy(axes[i][1].y()),
+              R"(stroke="#222222" stroke-dasharray="6 3")");
   }
   // Legend: -4 tol .. +4 tol.
-  const double ly = height - legend + 10, lw = 320;
+  const double ly = height - legend + 10, lw = 300;
   for (int k = 0; k < 64; ++k) {
     const double d = (-4 + 8 * (k + 0.5) / 64) * tol;
     s += fmt::format(R"(<rect x="{}" y="{}" width="{}" height="14" fill="{}"/>)"
                      "\n",
                      num(margin + k * lw / 64), num(ly), num(lw / 64 + 0.3), hex(deviation_color(d, tol)));
   }
-  for (int k : {-4, -1, 0, 1, 4}) {
+  for (int k : {-4, -1, 1, 4}) {
     const double x = margin + (k + 4) * lw / 8;
     s += line(x, ly + 14, x, ly + 18, R"(stroke="#000000")");
     s += text(x, ly + 30, fixed(k * tol, 4), R"(text-anchor="middle" font-size="10")");
   }
-  s += text(margin + lw + 12, ly + 11, "signed deviation, mm: blue overcut,");
-  s += text(margin + lw + 12, ly + 25, "green within tolerance, red undercut");
+  s += text(margin + lw + 40, ly + 11, "signed deviation, mm: blue overcut,");
+  s += text(margin + lw + 40, ly + 25, "green within tolerance, red undercut");
   s += fmt::format(R"(<rect x="{}" y="{}" width="14" height="14" fill="{}"/>)"
                    "\n",
-                   num(margin + lw + 12), num(ly + 30), hex(deviation_color(NAN, tol)));
-  s += text(margin + lw + 32, ly + 42, "not reached by this patch");
+                   num(margin + lw + 40), num(ly + 32), hex(deviation_color(NAN, tol)));
+  s += text(margin + lw + 60, ly + 44, "not reached by this patch");
   return s + "</svg>\n";
 }
 

@@ -207,3 +207,20 @@ TEST_CASE("programmed coordinates: tip and angles with TCP, machine joints witho
     CHECK((q.linear - pose.tip).norm() > 1);  // joints and tip differ for a tilted tool away from the pivots
   }
 }
+
+TEST_CASE("solve_path breaks a tie between mirror branches the same way whatever the round-off") {
+  // A tilted axis turning about Z: both A/C branches (A, C) and (-A, C + 180) travel exactly alike.
+  const Machine m = shipped("xyzac-trt");
+  for (double noise : {0.0, 1e-13, -1e-13}) {
+    CAPTURE(noise);
+    std::vector<ToolPose> poses;
+    for (int i = 0; i < 20; ++i) {
+      const double a = 0.05 * i;
+      poses.push_back({Eigen::Vector3d(50, 10 * i, 0), Eigen::Vector3d(0.2 * std::cos(a) + noise * i, 0.2 * std::sin(a), 0.98).normalized()});
+    }
+    const JointPath p = solve_path(m, poses, {}, PathOptions{});
+    REQUIRE(p.reachable);
+    // The A table's range is [-120, 30]: the branch nearer its middle tilts negative.
+    for (const Joints& j : p.joints) CHECK(j.rotary[0] < 0);
+  }
+}
