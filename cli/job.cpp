@@ -72,7 +72,18 @@ PatchJob read_patch(const Reader& r, const YAML::Node& p, const std::string& key
 
 void read_post(const Reader& r, const YAML::Node& p, PostJob& post) {
   r.only_keys(p, "post", {"dialects", "apt", "cl", "tool", "line_numbers", "tolerance", "angle_tolerance", "tool_length",
-                          "safe_height"});
+                          "safe_height", "setup"});
+  if (const YAML::Node s = p["setup"]) {
+    r.only_keys(s, "post.setup", {"rotate", "translate"});
+    const auto vec = [&](const char* key, std::array<double, 3>& v) {
+      const YAML::Node n = s[key];
+      if (!n) return;
+      if (!n.IsSequence() || n.size() != 3) r.fail(n, std::string("post.setup.") + key, "expected 3 numbers");
+      for (size_t k = 0; k < 3; ++k) v[k] = r.number(n[k], fmt::format("post.setup.{}[{}]", key, k));
+    };
+    vec("rotate", post.setup_rotate_deg);
+    vec("translate", post.setup_translate_mm);
+  }
   if (const YAML::Node d = p["dialects"]) {
     if (!d.IsSequence() || d.size() == 0) r.fail(d, "post.dialects", "expected a list such as [linuxcnc, iso]");
     for (size_t k = 0; k < d.size(); ++k) {

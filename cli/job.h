@@ -36,6 +36,9 @@ struct PostJob {
   double angle_tolerance_deg = 0.05;   // linearisation: axis off the intended motion
   double tool_length_mm = 0;           // spindle nose to tip; 0: holder + shank + cutter lengths
   double safe_height_mm = 10;          // safe Z above the highest programmed point
+  // Setup: how the part sits on the machine. Programs are in the work frame x_work = R x_part + t,
+  // R = Rz(c) Ry(b) Rx(a) for setup.rotate [a, b, c] degrees; t = setup.translate (mm).
+  std::array<double, 3> setup_rotate_deg{0, 0, 0}, setup_translate_mm{0, 0, 0};
 };
 
 struct Job {

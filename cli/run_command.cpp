@@ -2,6 +2,8 @@
 // solve the machine's kinematics, post NC programs, and write the report (JSON, SVG pictures, HTML).
 #include <fmt/format.h>
 
+#include <Eigen/Geometry>
+
 #include <filesystem>
 
 #include "cli/commands.h"
@@ -24,6 +26,17 @@ struct RunArgs {
 
 void write_text_file(const std::filesystem::path& path, const std::string& text) {
   write_file_atomically(path.string(), [&](std::ostream& o) { o << text; });
+}
+
+// The part's placement on the machine: part frame -> work frame.
+ToolPose to_work(const PostJob& post, const ToolPose& p) {
+  constexpr double deg = M_PI / 180;
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(post.setup_rotate_deg[2] * deg, Eigen::Vector3d::UnitZ()) *
+                             Eigen::AngleAxisd(post.setup_rotate_deg[1] * deg, Eigen::Vector3d::UnitY()) *
+                             Eigen::AngleAxisd(post.setup_rotate_deg[0] * deg, Eigen::Vector3d::UnitX()))
+                                .toRotationMatrix();
+  const Eigen::Vector3d t(post.setup_translate_mm[0], post.setup_translate_mm[1], post.setup_translate_mm[2]);
+  return {R * p.tip + t, (R * p.axis).normalized()};
 }
 
 // Spindle nose to tip: holder, shank and cutter, unless the job states it.
@@ -57,7 +70,9 @@ int run_job(const RunArgs& args) {
   for (size_t k = 0; k < fitted.patches.size(); ++k) {
     const FittedPatch& p = fitted.patches[k];
     if (!p.collisions.clear() && !args.allow_collisions) continue;
-    inputs.push_back({patch_program(job, fitted, p, int(k) + 1), p.job->name, tool_length(job, p)});
+    ClProgram cl = patch_program(job, fitted, p, int(k) + 1);
+    for (ClMove& mv : cl.moves) mv.pose = to_work(job.post, mv.pose);
+    inputs.push_back({std::move(cl), p.job->name, tool_length(job, p)});
     posted_patches.push_back(&p);
   }
   const std::filesystem::path out = args.out;
@@ -69,7 +84,10 @@ int run_job(const RunArgs& args) {
         out, machine, inputs, "all-patches", settings,
         {fmt::format("flankcam run of {}", job.file.filename().string()),
          fmt::format("machine {} ({}), units mm", machine.name, machine.kind()),
-         fmt::format("linearisation tolerance {} mm, {} deg", job.post.tolerance_mm, job.post.angle_tolerance_deg)});
+         fmt::format("linearisation tolerance {} mm, {} deg", job.post.tolerance_mm, job.post.angle_tolerance_deg),
+         fmt::format("work frame = part rotated X {} Y {} Z {} deg, moved by ({}, {}, {}) mm", job.post.setup_rotate_deg[0],
+                     job.post.setup_rotate_deg[1], job.post.setup_rotate_deg[2], job.post.setup_translate_mm[0],
+                     job.post.setup_translate_mm[1], job.post.setup_translate_mm[2])});
   }
 
   nlohmann::ordered_json report;

@@ -154,7 +154,13 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
       Hit h;
       h.at = f.point;
       if (s.cutter) {
-        h.depth = s.radius - f.distance;  // inside the cutter's sphere by this much
+        // The cutter is the solid of revolution of the spheres' radii between its flat end faces: a
+        // part point below the tip plane (a floor the tip stands on) is outside it, and a point inside
+        // is as deep as its way out through the side or the bottom face.
+        const Eigen::Vector3d d = f.point - pos[size_t(p)].tip;
+        const double zq = d.dot(pos[size_t(p)].axis), rho = (d - zq * pos[size_t(p)].axis).norm();
+        if (zq < -1e-9 * (1 + L) || zq > L) continue;  // beyond the cutter's end: the shank's samples see it
+        h.depth = std::min(cutter_radius(tool, std::clamp(zq, 0.0, L)) - rho, std::max(zq, 0.0));
         if (h.depth <= o.gouge_tolerance_mm) continue;
       } else {
         // Exact gap between the part point and the solid of revolution (2D, in the axis' half plane).

@@ -8,6 +8,7 @@
 
 #include "core/blade.h"
 #include "kinematics/machine.h"
+#include "postproc/apt.h"
 #include "postproc/gcode.h"
 #include "tests/test_util.h"
 
@@ -177,4 +178,39 @@ TEST_CASE("the bundled examples are what the generators make, and their jobs rea
   const std::string ex = std::string(FLANKCAM_SOURCE_DIR) + "/examples/";
   CHECK(test::read_text(dir.file("blade/blade.obj")) == test::read_text(ex + "blade/blade.obj"));
   CHECK(test::read_text(dir.file("blade/lines.yaml")) == test::read_text(ex + "blade/lines.yaml"));
+}
+
+TEST_CASE("flankcam run: the setup places the part on the machine; programs follow, CL-data stays in part coordinates") {
+  test::ScratchDir dir("run-setup");
+  std::string job = test::read_text(blade_job(dir, "xyzac-trt", "linuxcnc", 1));
+  job.replace(job.find("post: {dialects: [linuxcnc]}"), 28,
+              "post: {dialects: [linuxcnc], setup: {rotate: [0, 0, 90], translate: [5, -3, 10]}}");
+  test::write_text(dir.file("placed.yaml"), job);
+  const auto r = test::run_flankcam("run " + dir.file("placed.yaml") + " --out " + dir.file("out") + " --quiet", dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const auto& row = report["patches"][0]["axis"][0];
+  const Eigen::Vector3d a(row[0], row[1], row[2]), b(row[3], row[4], row[5]);
+  // Work frame: rotated 90 degrees about Z, then moved.
+  const Eigen::Vector3d tip = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()) * a + Eigen::Vector3d(5, -3, 10);
+  const Eigen::Vector3d axis = Eigen::AngleAxisd(M_PI / 2, Eigen::Vector3d::UnitZ()) * (b - a).normalized();
+  const Machine m = load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/xyzac-trt.yaml");
+  const auto points = parse_nc(test::read_text(dir.file("out/p1.ngc")), Dialect::LinuxCnc, {"A", "C"}, "p1.ngc");
+  bool found = false;
+  for (const NcPoint& p : points) {
+    if (p.rapid || p.known != AxesAll) continue;
+    const ToolPose s = programmed_pose(m, p.at, 0);
+    found = found || ((s.tip - tip).norm() < 1e-3 && angle(s.axis, axis) < 1e-5);
+  }
+  CHECK(found);
+  CHECK(read_apt(dir.file("out/p1.apt")).moves[2].pose.tip.isApprox(a, 1e-6));  // CL-data: part frame
+  CHECK(test::read_text(dir.file("out/p1.ngc")).find("work frame = part rotated X 0 Y 0 Z 90 deg, moved by [5, -3, 10] mm") !=
+        std::string::npos);
+
+  job.replace(job.find("rotate: [0, 0, 90]"), 18, "rotate: [0, 90]");
+  test::write_text(dir.file("bad.yaml"), job);
+  const auto bad = test::run_flankcam("run " + dir.file("bad.yaml") + " --out " + dir.file("out2"), dir);
+  CHECK(bad.code == 2);
+  CHECK(bad.err.find("bad.yaml:8: post.setup.rotate: expected 3 numbers") != std::string::npos);
 }

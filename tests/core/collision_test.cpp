@@ -171,3 +171,18 @@ TEST_CASE("the assembly mesh is closed and spans the assembly") {
   CHECK(b.max.y() - b.min.y() == doctest::Approx(t.total_length()));
   CHECK(b.max.x() - b.min.x() == doctest::Approx(50).epsilon(0.01));
 }
+
+TEST_CASE("the cutter is flat-ended: standing on a floor is no gouge, sinking into it is, by the depth") {
+  // Flank cutting with the tip on the floor (a hub wall): the axis vertical, the tip on the plane z = 0.
+  const SurfaceIndex part(plane(500));
+  CollisionOptions o;
+  o.gouge_tolerance_mm = 0.01;
+  std::vector<ToolPose> poses;
+  for (int i = 0; i < 5; ++i) poses.push_back({Eigen::Vector3d(10.0 * i, 0, 0.0), Eigen::Vector3d::UnitZ()});
+  CHECK(check_collisions(part, poses, assembly(), o).clear());  // the spheres' caps would have reported 5 mm
+  for (ToolPose& p : poses) p.tip.z() = -0.3;  // 0.3 mm into the floor
+  const CollisionReport r = check_collisions(part, poses, assembly(), o);
+  REQUIRE(r.intervals.size() == 1);
+  CHECK(r.intervals[0].component == Component::Tool);
+  CHECK(r.intervals[0].max_depth_mm == doctest::Approx(0.3).epsilon(1e-6));
+}
