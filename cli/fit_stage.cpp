@@ -96,9 +96,14 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
 std::vector<std::string> collision_summary(const FittedPatch& p) {
   std::vector<std::string> out;
   for (const CollisionInterval& iv : p.collisions.intervals)
-    out.push_back(fmt::format("patch {}: {} {} at poses {}-{}, {:.3f} mm deep at ({:.3f}, {:.3f}, {:.3f})", p.job->name,
-                              to_string(iv.component), iv.component == Component::Tool ? "gouges" : "collides",
-                              iv.pose_begin, iv.pose_end, iv.max_depth_mm, iv.at.x(), iv.at.y(), iv.at.z()));
+    out.push_back(iv.max_depth_mm >= 0
+                      ? fmt::format("patch {}: {} {} at poses {}-{}, {:.3f} mm deep at ({:.3f}, {:.3f}, {:.3f})", p.job->name,
+                                    to_string(iv.component), iv.component == Component::Tool ? "gouges" : "collides",
+                                    iv.pose_begin, iv.pose_end, iv.max_depth_mm, iv.at.x(), iv.at.y(), iv.at.z())
+                      : fmt::format("patch {}: {} inside the clearance at poses {}-{}, {:.3f} mm from the part at "
+                                    "({:.3f}, {:.3f}, {:.3f})",
+                                    p.job->name, to_string(iv.component), iv.pose_begin, iv.pose_end, -iv.max_depth_mm,
+                                    iv.at.x(), iv.at.y(), iv.at.z()));
   return out;
 }
 

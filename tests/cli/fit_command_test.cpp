@@ -217,7 +217,7 @@ TEST_CASE("flankcam fit checks shank and holder against the part: a shank wider 
       CHECK(std::string(col[0]["component"]) == "shank");
       // The shank's end face (r = 15) sits 0.1 mm above the envelope's top edge: within the 0.5 mm clearance.
       CHECK(double(col[0]["depth_mm"]) > -0.5);
-      CHECK(run.err.find("patch surface-driven: shank collides at poses") != std::string::npos);
+      CHECK(run.err.find("patch surface-driven: shank inside the clearance at poses") != std::string::npos);
       CHECK(std::filesystem::file_size(out + "/surface-driven-collisions.obj") > 1000);
     }
   }
