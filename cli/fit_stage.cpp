@@ -252,6 +252,12 @@ ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p
   ClProgram cl = flank_program(p.job->name, p.poses, tool_profile_mm(f.frame, p.fit.fit), job.feed_mm_min, job.spindle_rpm,
                                job.lead_in_mm, job.retract_mm);
   cl.tool = tool;
+  // A contact point per pass pose: the design surface nearest the middle of the cutter.
+  const SurfaceIndex surface(f.surface.mesh);
+  const double half = 0.5 * p.assembly.cutter_length();
+  const size_t first = job.lead_in_mm < job.retract_mm ? 2 : 1;  // flank_program: clearance, lead-in, then the pass
+  for (size_t i = 0; i < p.poses.size(); ++i)
+    cl.moves[first + i].contact = surface.closest(p.poses[i].tip + half * p.poses[i].axis).point;
   cl.comments.push_back(fmt::format("FLANKCAM FIT OF {}, EPS {:.4f} MM, TOLERANCE {} MM", job.surface.filename().string(),
                                     f.frame.length_to_mm(p.fit.fit.eps_opt.max), job.tolerance_mm));
   if (!p.collisions.clear()) cl.comments.push_back("WARNING: COLLISIONS ALLOWED, SEE REPORT.JSON");

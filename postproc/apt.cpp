@@ -238,13 +238,15 @@ ClProgram read_apt(const std::string& path) {
 
 std::string cl_csv(const ClProgram& p) {
   std::string out = "# flankcam CL data, mm, part coordinates; axis from the tip towards the spindle\n"
-                    "index,motion,x,y,z,i,j,k,feed_mm_min\n";
+                    "index,motion,x,y,z,i,j,k,cx,cy,cz,feed_mm_min\n";
   for (size_t n = 0; n < p.moves.size(); ++n) {
     const ClMove& m = p.moves[n];
     const Eigen::Vector3d k = m.pose.axis.normalized();
-    out += fmt::format("{},{},{},{},{},{},{},{},{}\n", n, m.rapid ? "rapid" : "feed", fixed(m.pose.tip.x(), 6),
+    const bool known = m.contact.allFinite();
+    out += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{}\n", n, m.rapid ? "rapid" : "feed", fixed(m.pose.tip.x(), 6),
                        fixed(m.pose.tip.y(), 6), fixed(m.pose.tip.z(), 6), fixed(k.x(), 9), fixed(k.y(), 9), fixed(k.z(), 9),
-                       fixed(m.feed_mm_min, 3));
+                       known ? fixed(m.contact.x(), 6) : "", known ? fixed(m.contact.y(), 6) : "",
+                       known ? fixed(m.contact.z(), 6) : "", fixed(m.feed_mm_min, 3));
   }
   return out;
 }

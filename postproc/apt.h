@@ -3,6 +3,7 @@
 // source (`flankcam post`).
 #pragma once
 #include <Eigen/Core>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,9 @@ struct ClMove {
   ToolPose pose;
   bool rapid = false;
   double feed_mm_min = 0;  // feed moves
+  // A point of the contact curve (the design surface point nearest the middle of the cutter);
+  // NaN when unknown (rapids, CL-data from elsewhere). Written to the CSV only.
+  Eigen::Vector3d contact = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
 };
 
 struct ClProgram {
@@ -52,7 +56,8 @@ void write_apt(const std::string& path, const ClProgram& p);
 [[nodiscard]] ClProgram read_apt(const std::string& path);
 [[nodiscard]] ClProgram parse_apt(const std::string& text, const std::string& name);
 
-// CL-data as CSV: index, motion (rapid/feed), tip x y z, axis i j k, feed.
+// CL-data as CSV: index, motion (rapid/feed), tip x y z, axis i j k, contact point cx cy cz (empty when
+// unknown), feed.
 [[nodiscard]] std::string cl_csv(const ClProgram& p);
 
 }  // namespace flankcam

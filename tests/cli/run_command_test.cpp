@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <filesystem>
+#include <sstream>
 #include <nlohmann/json.hpp>
 
 #include "core/blade.h"
@@ -100,6 +101,31 @@ TEST_CASE("flankcam run end to end: the program, back-simulated through the mach
     MESSAGE(file << ": " << fitted.size() << " fitted poses reached; joint interpolation within " << worst << " mm");
     CHECK(worst < 0.005 + 2e-4);
   }
+  // CL CSV: each pass row's contact point lies on the tool: its distance from the axis is the
+  // tool's radius at its height, within the fitted error.
+  std::vector<Eigen::Vector2d> profile;
+  for (const auto& zr : patch["tool"]["profile"]) profile.emplace_back(double(zr[0]), double(zr[1]));
+  std::istringstream csv(test::read_text(dir.file("out/p1-cl.csv")));
+  std::string row;
+  int contacts = 0;
+  double worst_contact = 0;
+  while (std::getline(csv, row)) {
+    std::vector<std::string> c;
+    std::istringstream cells(row);
+    for (std::string cell; std::getline(cells, cell, ',');) c.push_back(cell);
+    if (c.size() != 12 || c[1] != "feed" || c[8].empty()) continue;
+    const Eigen::Vector3d tip(std::stod(c[2]), std::stod(c[3]), std::stod(c[4])), k(std::stod(c[5]), std::stod(c[6]), std::stod(c[7]));
+    const Eigen::Vector3d q = Eigen::Vector3d(std::stod(c[8]), std::stod(c[9]), std::stod(c[10])) - tip;
+    const double z = q.dot(k), rho = (q - z * k).norm();
+    size_t j = 1;
+    while (j + 1 < profile.size() && profile[j].x() < z) ++j;
+    const double f = std::clamp((z - profile[j - 1].x()) / (profile[j].x() - profile[j - 1].x()), 0.0, 1.0);
+    worst_contact = std::max(worst_contact, std::abs(rho - ((1 - f) * profile[j - 1].y() + f * profile[j].y())));
+    ++contacts;
+  }
+  CHECK(contacts == int(fitted.size()));
+  CHECK(worst_contact < 0.015);
+
   // The report people look at: offline, one picture of each kind per patch.
   const std::string html = test::read_text(dir.file("out/report.html"));
   CHECK(html.find("<svg") != std::string::npos);
