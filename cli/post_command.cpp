@@ -7,6 +7,7 @@
 #include "cli/commands.h"
 #include "cli/post_stage.h"
 #include "core/errors.h"
+#include "postproc/tool_export.h"
 
 namespace flankcam::cli {
 
@@ -45,6 +46,10 @@ int run_post(const PostArgs& args) {
       out, m, inputs, args.name, s,
       {fmt::format("flankcam post for machine {} ({}), units mm", m.name, m.kind()),
        fmt::format("linearisation tolerance {} mm, {} deg", args.tolerance_mm, s.options.path.angle_tolerance_deg)});
+  // The simulator's tool goes with the programs when the CL-data carries the profile (flankcam's PPRINTs).
+  for (const PostInput& in : inputs)
+    if (in.cl.profile.size() >= 2)
+      write_tool_stl((out / (in.patch + "-tool.stl")).string(), in.cl.profile, "tool of " + in.patch + ", mm");
   fmt::print("{:<24} {:<10} {:>6} {:>8} {:>6} {:>17} {:>17} {:>9}\n", "program", "dialect", "moves", "inserted", "slowed",
              m.rotary[0].name + " range deg", m.rotary[1].name + " range deg", "cut min");
   for (const WrittenProgram& w : written)

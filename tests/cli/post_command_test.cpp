@@ -18,7 +18,7 @@ TEST_CASE("flankcam post: APT from a file through a shipped machine, read back o
   const auto r = test::run_flankcam("post " + kApt + " " + dir.file("b.apt") + " --machine xyzbc-trt --out " + dir.file("out"), dir);
   INFO(r.err);
   REQUIRE(r.code == 0);
-  for (const char* f : {"small-patch.nc", "b.nc", "all.nc"}) CHECK(std::filesystem::exists(dir.file(std::string("out/") + f)));
+  for (const char* f : {"small-patch.nc", "b.nc", "all.nc", "small-patch-tool.stl"}) CHECK(std::filesystem::exists(dir.file(std::string("out/") + f)));
   // The program's feed end points are the APT's GOTOs, through the machine's forward kinematics.
   const Machine m = load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/xyzbc-trt.yaml");
   const ClProgram cl = read_apt(kApt);
