@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <filesystem>
+#include <optional>
 
 #include "cli/commands.h"
 #include "cli/fit_stage.h"
@@ -42,7 +43,9 @@ int run_fit(const FitArgs& args) {
   for (const FittedPatch& p : fitted.patches) {
     nlohmann::ordered_json entry = patch_report(job, fitted, p);
     // A colliding motion gets no CL-data unless allowed.
-    const std::vector<std::string> files = write_patch_files(out, job, fitted, p, {p.collisions.clear() || args.allow_collisions});
+    std::optional<ClProgram> cl;
+    if (p.collisions.clear() || args.allow_collisions) cl = patch_program(job, fitted, p, 1);
+    const std::vector<std::string> files = write_patch_files(out, job, fitted, p, {cl ? &*cl : nullptr});
     entry["files"] = files;
     patches.push_back(entry);
     fmt::print("{:<16} {:<6} {:<9} {:>10.2e} {:>10.4f} {:>8.1f}%  {}\n", p.job->name, to_string(p.job->init),

@@ -73,7 +73,11 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   const TriMesh& part = separate ? separate->mesh : f.surface.mesh;
   progress(fmt::format("collision checks against {} ({} triangles), clearance {} mm", job.part.string(), part.faces.size(),
                        job.clearance_mm));
-  const SurfaceIndex index(part);
+  // The design surface in mm: contact points; it is the part too unless a separate one is given.
+  const SurfaceIndex design(f.surface.mesh);
+  std::optional<SurfaceIndex> separate_index;
+  if (separate) separate_index.emplace(separate->mesh);
+  const SurfaceIndex& index = separate_index ? *separate_index : design;
   CollisionOptions o;
   o.clearance_mm = job.clearance_mm;
   o.gouge_tolerance_mm = job.tolerance_mm;
@@ -87,6 +91,10 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
       p.poses.push_back({a, (b - a).normalized()});
     }
     p.assembly = assembly_of(job, f.frame, r);
+    p.profile_mm = tool_profile_mm(f.frame, r);
+    const double half = 0.5 * p.assembly.cutter_length();
+    p.contacts.clear();
+    for (const ToolPose& q : p.poses) p.contacts.push_back(design.closest(q.tip + half * q.axis).point);
     p.collisions = check_collisions(index, p.poses, p.assembly, o);
     for (const std::string& line : collision_summary(p)) progress(line);
   }
@@ -193,7 +201,7 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
   tool["shape"] = to_string(r.tool.shape);
   tool["length"] = round_mm(L);
   auto& profile = tool["profile"] = nlohmann::ordered_json::array();
-  const std::vector<Eigen::Vector2d> meridian_mm = tool_profile_mm(fr, r);
+  const std::vector<Eigen::Vector2d>& meridian_mm = p.profile_mm;
   for (const Eigen::Vector2d& zr : meridian_mm) profile.push_back({round_mm(zr.x()), round_mm(zr.y())});
   tool["profile_note"] = "meridian [z, r] in mm, z along the axis from the tool tip end (a) towards b";
   const ToolDimensions dims = tool_dimensions(meridian_mm);
@@ -249,15 +257,11 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
 }
 
 ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p, int tool) {
-  ClProgram cl = flank_program(p.job->name, p.poses, tool_profile_mm(f.frame, p.fit.fit), job.feed_mm_min, job.spindle_rpm,
-                               job.lead_in_mm, job.retract_mm);
+  ClProgram cl = flank_program(p.job->name, p.poses, p.profile_mm, job.feed_mm_min, job.spindle_rpm, job.lead_in_mm,
+                               job.retract_mm);
   cl.tool = tool;
-  // A contact point per pass pose: the design surface nearest the middle of the cutter.
-  const SurfaceIndex surface(f.surface.mesh);
-  const double half = 0.5 * p.assembly.cutter_length();
   const size_t first = job.lead_in_mm < job.retract_mm ? 2 : 1;  // flank_program: clearance, lead-in, then the pass
-  for (size_t i = 0; i < p.poses.size(); ++i)
-    cl.moves[first + i].contact = surface.closest(p.poses[i].tip + half * p.poses[i].axis).point;
+  for (size_t i = 0; i < p.poses.size(); ++i) cl.moves[first + i].contact = p.contacts[i];
   cl.comments.push_back(fmt::format("FLANKCAM FIT OF {}, EPS {:.4f} MM, TOLERANCE {} MM", job.surface.filename().string(),
                                     f.frame.length_to_mm(p.fit.fit.eps_opt.max), job.tolerance_mm));
   if (!p.collisions.clear()) cl.comments.push_back("WARNING: COLLISIONS ALLOWED, SEE REPORT.JSON");
@@ -284,7 +288,7 @@ std::vector<std::string> write_patch_files(const std::filesystem::path& out, con
   write_ply((out / (name + "-deviation.ply")).string(), f.surface.mesh, deviation_colors(design_dev, job.tolerance_mm),
             design_dev, "deviation_mm", "design surface vs patch " + name + "; " + tol);
   std::vector<std::string> files = {name + "-envelope.ply", name + "-deviation.ply"};
-  const std::vector<Eigen::Vector2d> profile = tool_profile_mm(fr, p.fit.fit);
+  const std::vector<Eigen::Vector2d>& profile = p.profile_mm;
   if (what.tool) {
     write_file_atomically((out / (name + "-tool.csv")).string(), [&](std::ostream& o) {
       o << "# tool of patch " << name << ": meridian of a " << to_string(p.fit.fit.tool.shape)
@@ -297,14 +301,14 @@ std::vector<std::string> write_patch_files(const std::filesystem::path& out, con
     write_tool_stl((out / (name + "-tool.stl")).string(), profile, title);
     files.insert(files.end(), {name + "-tool.csv", name + "-tool.dxf", name + "-tool.stl"});
   }
-  if (what.program && (what.apt || what.cl)) {
-    const ClProgram cl = patch_program(job, f, p, what.tool_number);
-    if (what.apt) write_apt((out / (name + ".apt")).string(), cl), files.push_back(name + ".apt");
+  if (what.program) {
+    if (what.apt) write_apt((out / (name + ".apt")).string(), *what.program), files.push_back(name + ".apt");
     if (what.cl) {
-      write_file_atomically((out / (name + "-cl.csv")).string(), [&](std::ostream& o) { o << cl_csv(cl); });
+      write_file_atomically((out / (name + "-cl.csv")).string(), [&](std::ostream& o) { o << cl_csv(*what.program); });
       files.push_back(name + "-cl.csv");
     }
   }
+
   if (!p.collisions.clear()) {
     TriMesh all;
     for (const CollisionInterval& iv : p.collisions.intervals) {

@@ -23,6 +23,8 @@ struct FittedPatch {
   PatchFit fit;                  // unit frame
   std::vector<ToolPose> poses;   // the fitted motion at its samples t_i, mm, part coordinates
   ToolAssembly assembly;         // cutter spheres from the fit, shank and holder from the job, mm
+  std::vector<Eigen::Vector2d> profile_mm;  // the tool's meridian (z, r) from the tip, mm
+  std::vector<Eigen::Vector3d> contacts;    // per pose: the design surface nearest the middle of the cutter, mm
   CollisionReport collisions;    // against the whole part
 };
 
@@ -53,13 +55,12 @@ struct FittedJob {
 [[nodiscard]] ClProgram patch_program(const Job& job, const FittedJob& fitted, const FittedPatch& patch, int tool);
 
 struct PatchOutputs {
-  bool program = true;       // CL-data at all (false for a colliding patch unless collisions are allowed)
+  const ClProgram* program = nullptr;  // CL-data (none for a colliding patch unless collisions are allowed)
   bool apt = true, cl = true, tool = true;
-  int tool_number = 1;
 };
 // Files of a fitted patch in `out`: NAME-envelope.ply (Ω with its deviation from Φ), NAME-deviation.ply
 // (Φ with its deviation from Ω); with `tool`, NAME-tool.csv (meridian z, r in mm), NAME-tool.dxf and
-// NAME-tool.stl; with `program`, NAME.apt (APT CL-data) and NAME-cl.csv; when it collides,
+// NAME-tool.stl; with a `program`, NAME.apt (APT CL-data) and NAME-cl.csv; when it collides,
 // NAME-collisions.obj (the assembly at the worst pose of each interval). Returns the file names.
 std::vector<std::string> write_patch_files(const std::filesystem::path& out, const Job& job, const FittedJob& fitted,
                                            const FittedPatch& patch, const PatchOutputs& what);

@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 
 #include <filesystem>
+#include <optional>
 
 #include "cli/commands.h"
 #include "cli/fit_stage.h"
@@ -65,15 +66,15 @@ int run_job(const RunArgs& args) {
 
   // Kinematics and programs for every patch allowed to run, all solved before any file is written:
   // an unreachable pose ends the run with nothing half done.
-  std::vector<PostInput> inputs;
-  std::vector<const FittedPatch*> posted_patches;
+  std::vector<std::optional<ClProgram>> cl_data(fitted.patches.size());  // part coordinates
+  std::vector<PostInput> inputs;                                        // work coordinates
   for (size_t k = 0; k < fitted.patches.size(); ++k) {
     const FittedPatch& p = fitted.patches[k];
     if (!p.collisions.clear() && !args.allow_collisions) continue;
-    ClProgram cl = patch_program(job, fitted, p, int(k) + 1);
-    for (ClMove& mv : cl.moves) mv.pose = to_work(job.post, mv.pose);
-    inputs.push_back({std::move(cl), p.job->name, tool_length(job, p)});
-    posted_patches.push_back(&p);
+    cl_data[k] = patch_program(job, fitted, p, int(k) + 1);
+    ClProgram work = *cl_data[k];
+    for (ClMove& mv : work.moves) mv.pose = to_work(job.post, mv.pose);
+    inputs.push_back({std::move(work), p.job->name, tool_length(job, p)});
   }
   const std::filesystem::path out = args.out;
   std::filesystem::create_directories(out);
@@ -116,10 +117,10 @@ int run_job(const RunArgs& args) {
   for (size_t k = 0; k < fitted.patches.size(); ++k) {
     const FittedPatch& p = fitted.patches[k];
     const std::string& name = p.job->name;
-    const bool allowed = p.collisions.clear() || args.allow_collisions;
+    const bool allowed = cl_data[k].has_value();
     colliding += !p.collisions.clear();
-    std::vector<std::string> files =
-        write_patch_files(out, job, fitted, p, {allowed, job.post.apt, job.post.cl, job.post.tool, int(k) + 1});
+    std::vector<std::string> files = write_patch_files(
+        out, job, fitted, p, {allowed ? &*cl_data[k] : nullptr, job.post.apt, job.post.cl, job.post.tool});
     std::vector<std::string> patch_programs;
     nlohmann::ordered_json program_entries = nlohmann::ordered_json::array();
     const WrittenProgram* chart = nullptr;
@@ -131,7 +132,7 @@ int run_job(const RunArgs& args) {
       }
 
     // Pictures.
-    const std::vector<Eigen::Vector2d> profile = patch_program(job, fitted, p, 1).profile;
+    const std::vector<Eigen::Vector2d>& profile = p.profile_mm;
     std::vector<double> dev = p.fit.machined.design_deviation;
     for (double& d : dev) d = fitted.frame.length_to_mm(d);
     const double eps_mm = fitted.frame.length_to_mm(p.fit.fit.eps_opt.max);
