@@ -114,15 +114,9 @@ ClProgram parse_apt(const std::string& text, const std::string& name) {
     throw InputError(fmt::format("{}:{}: {}", name, stmt_line, what));
   };
   const auto number = [&](const std::string& s, const std::string& what) {
-    size_t used = 0;
-    double v = 0;
-    try {
-      v = std::stod(s, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used == 0 || used != s.size() || !std::isfinite(v)) fail(what + ": '" + s + "' is not a number");
-    return v;
+    const std::optional<double> v = parse_number(s);
+    if (!v) fail(what + ": '" + s + "' is not a number");
+    return *v;
   };
   const auto handle = [&](std::string s) {
     s.erase(std::remove_if(s.begin(), s.end(), [](unsigned char ch) { return std::isspace(ch); }), s.end());

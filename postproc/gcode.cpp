@@ -293,15 +293,9 @@ struct ReaderState {
 }
 
 double number(const std::string& s, const std::string& file, int line) {
-  size_t used = 0;
-  double v = 0;
-  try {
-    v = std::stod(s, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  if (used != s.size() || s.empty() || !std::isfinite(v)) fail(file, line, "'" + s + "' is not a number");
-  return v;
+  const std::optional<double> v = parse_number(s);
+  if (!v) fail(file, line, "'" + s + "' is not a number");
+  return *v;
 }
 
 // Index of an axis letter in the programmed values: 0..2 linear, 3..4 rotary, -1 none.
