@@ -71,6 +71,12 @@ class Emitter {
   virtual void move(const NcProgram& p, const NcMove& m) = 0;
   virtual void end(const NcProgram& p) = 0;
   [[nodiscard]] virtual std::string text() const = 0;
+
+ protected:
+  // What the operator checks at the tool change: number, name, diameter and length (mm).
+  static std::string tool_comment(const NcToolChange& t) {
+    return fmt::format("T{} {} D{} L{}", t.number, t.name, fixed(t.diameter_mm, 3), fixed(t.length_mm, 3));
+  }
 };
 
 // Fanuc-style G-code, shared by iso, linuxcnc and sinumerik: G0/G1 modal, G93 inverse time with F on
@@ -130,7 +136,7 @@ class IsoEmitter final : public GcodeEmitter {
   }
   void comment(const std::string& text) override { lines_.add("(" + comment_text(text) + ")"); }
   void tool_change(const NcProgram& p, const NcToolChange& t, double) override {
-    comment(fmt::format("T{} {} D{} L{}", t.number, t.name, fixed(t.diameter_mm, 3), fixed(t.length_mm, 3)));
+    comment(tool_comment(t));
     lines_.add(fmt::format("T{} M6", t.number));
     // TCP (G43.4) carries the tool length compensation; joints need G43.
     lines_.add(fmt::format("{} H{}", p.tcp ? "G43.4" : "G43", t.number));
@@ -155,7 +161,7 @@ class LinuxCncEmitter final : public GcodeEmitter {
   }
   void comment(const std::string& text) override { lines_.add("(" + comment_text(text) + ")"); }
   void tool_change(const NcProgram&, const NcToolChange& t, double) override {
-    comment(fmt::format("T{} {} D{} L{}", t.number, t.name, fixed(t.diameter_mm, 3), fixed(t.length_mm, 3)));
+    comment(tool_comment(t));
     lines_.add(fmt::format("T{} M6", t.number));
     lines_.add(fmt::format("G43 H{}", t.number));
   }
@@ -178,7 +184,7 @@ class SinumerikEmitter final : public GcodeEmitter {
   void comment(const std::string& text) override { lines_.add("; " + comment_text(text)); }
   void tool_change(const NcProgram& p, const NcToolChange& t, double) override {
     if (tcp_) lines_.add("TRAFOOF"), tcp_ = false;
-    comment(fmt::format("T{} {} D{} L{}", t.number, t.name, fixed(t.diameter_mm, 3), fixed(t.length_mm, 3)));
+    comment(tool_comment(t));
     lines_.add(fmt::format("T{} M6", t.number));
     lines_.add("D1");
     if (p.tcp) lines_.add("TRAORI"), tcp_ = true;
@@ -207,7 +213,7 @@ class HeidenhainEmitter final : public Emitter {
   void comment(const std::string& text) override { lines_.add("; " + comment_text(text)); }
   void tool_change(const NcProgram& p, const NcToolChange& t, double next_rpm) override {
     if (tcp_) lines_.add("FUNCTION RESET TCPM"), tcp_ = false;
-    comment(fmt::format("T{} {} D{} L{}", t.number, t.name, fixed(t.diameter_mm, 3), fixed(t.length_mm, 3)));
+    comment(tool_comment(t));
     lines_.add(fmt::format("TOOL CALL {} Z S{}", t.number, rpm(next_rpm)));
     rpm_ = next_rpm;
     if (p.tcp) lines_.add("FUNCTION TCPM F TCP AXIS POS PATHCTRL AXIS"), tcp_ = true;

@@ -1,25 +1,16 @@
 #include "postproc/report_html.h"
 
+#include "postproc/markup.h"
+
 namespace flankcam {
 
 namespace {
-std::string escape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    if (c == '<') out += "&lt;";
-    else if (c == '>') out += "&gt;";
-    else if (c == '&') out += "&amp;";
-    else if (c == '"') out += "&quot;";
-    else out += c;
-  }
-  return out;
-}
 // An inline SVG without its XML prolog (the documents here have none) inside a figure.
 std::string figure(const std::string& svg) { return "<figure>\n" + svg + "</figure>\n"; }
 }  // namespace
 
 std::string report_html(const HtmlReport& r) {
-  std::string h = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" + escape(r.title) +
+  std::string h = "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n<title>" + markup_escape(r.title) +
                   "</title>\n<style>\n"
                   "body{font-family:sans-serif;margin:24px;color:#222;max-width:1400px}\n"
                   "table{border-collapse:collapse;margin:12px 0}\n"
@@ -29,29 +20,29 @@ std::string report_html(const HtmlReport& r) {
                   "figure{display:inline-block;vertical-align:top;margin:8px 16px 8px 0}\n"
                   "section{border-top:2px solid #1f3b63;margin-top:24px}\n"
                   "</style>\n</head>\n<body>\n<h1>" +
-                  escape(r.title) + "</h1>\n";
-  for (const auto& p : r.intro) h += "<p>" + escape(p) + "</p>\n";
+                  markup_escape(r.title) + "</h1>\n";
+  for (const auto& p : r.intro) h += "<p>" + markup_escape(p) + "</p>\n";
   h += "<table>\n<tr>";
-  for (const auto& c : r.columns) h += "<th>" + escape(c) + "</th>";
+  for (const auto& c : r.columns) h += "<th>" + markup_escape(c) + "</th>";
   h += "</tr>\n";
   for (const auto& row : r.rows) {
     h += "<tr>";
-    for (const auto& c : row) h += "<td>" + escape(c) + "</td>";
+    for (const auto& c : row) h += "<td>" + markup_escape(c) + "</td>";
     h += "</tr>\n";
   }
   h += "</table>\n";
   for (const HtmlSection& s : r.sections) {
-    h += "<section>\n<h2>" + escape(s.heading) + "</h2>\n";
-    for (const auto& w : s.warnings) h += "<div class=\"warn\">" + escape(w) + "</div>\n";
+    h += "<section>\n<h2>" + markup_escape(s.heading) + "</h2>\n";
+    for (const auto& w : s.warnings) h += "<div class=\"warn\">" + markup_escape(w) + "</div>\n";
     if (!s.facts.empty()) {
       h += "<table>\n";
-      for (const auto& [k, v] : s.facts) h += "<tr><th>" + escape(k) + "</th><td>" + escape(v) + "</td></tr>\n";
+      for (const auto& [k, v] : s.facts) h += "<tr><th>" + markup_escape(k) + "</th><td>" + markup_escape(v) + "</td></tr>\n";
       h += "</table>\n";
     }
     for (const auto& svg : s.svgs) h += figure(svg);
     if (!s.files.empty()) {
       h += "<p>Files:";
-      for (const auto& f : s.files) h += " <a href=\"" + escape(f) + "\">" + escape(f) + "</a>";
+      for (const auto& f : s.files) h += " <a href=\"" + markup_escape(f) + "\">" + markup_escape(f) + "</a>";
       h += "</p>\n";
     }
     h += "</section>\n";

@@ -9,6 +9,7 @@
 #include <limits>
 
 #include "core/number_format.h"
+#include "postproc/markup.h"
 
 namespace flankcam {
 
@@ -27,11 +28,6 @@ namespace {
 
 std::string num(double x) { return fixed(x, 2); }
 std::string hex(const std::array<unsigned char, 3>& c) { return fmt::format("#{:02x}{:02x}{:02x}", c[0], c[1], c[2]); }
-std::string escape(const std::string& s) {
-  std::string out;
-  for (char c : s) out += c == '<' ? "&lt;" : c == '>' ? "&gt;" : c == '&' ? "&amp;" : std::string(1, c);
-  return out;
-}
 std::string header(double w, double h) {
   return fmt::format(R"(<svg xmlns="http://www.w3.org/2000/svg" width="{0}" height="{1}" viewBox="0 0 {0} {1}" )"
                      R"(font-family="sans-serif" font-size="12">)"
@@ -41,7 +37,7 @@ std::string header(double w, double h) {
 std::string text(double x, double y, const std::string& s, const std::string& extra = "") {
   return fmt::format(R"(<text x="{}" y="{}"{}>{}</text>)"
                      "\n",
-                     num(x), num(y), extra.empty() ? "" : " " + extra, escape(s));
+                     num(x), num(y), extra.empty() ? "" : " " + extra, markup_escape(s));
 }
 std::string line(double x0, double y0, double x1, double y1, const std::string& style) {
   return fmt::format(R"(<line x1="{}" y1="{}" x2="{}" y2="{}" {}/>)"
