@@ -6,6 +6,7 @@
 
 #include "cli/commands.h"
 #include "core/atomic_file.h"
+#include "pipeline/output_dir.h"
 #include "core/blade.h"
 #include "core/number_format.h"
 
@@ -22,14 +23,14 @@ struct BladeArgs {
 
 int run_blade(const BladeArgs& args) {
   const Blade b = make_blade(args.blade);
-  std::filesystem::create_directories(args.out);
+  pipeline::OutputDir out(args.out);
   const BladeOptions& o = args.blade;
   const std::string what = fmt::format(
       "flankcam blade: NACA {:.0f}{:.0f}{:02.0f} suction side, chord {} -> {} mm, span {} mm, twist {} deg, chord {} .. {}",
       100 * o.camber, 10 * o.camber_position, 100 * o.thickness, o.chord_hub, o.chord_tip, o.span, o.twist_deg, o.chord_from,
       o.chord_to);
-  write_obj(args.out + "/blade.obj", b.mesh, what + ", mm");
-  write_file_atomically(args.out + "/lines.yaml", [&](std::ostream& s) {
+  write_obj(out.file("blade.obj"), b.mesh, what + ", mm");
+  write_file_atomically(out.file("lines.yaml"), [&](std::ostream& s) {
     s << "# " << what << "\n# Initialisation lines (mm), " << args.offset_mm << " mm off the surface, hub end first.\n";
     for (int n : args.patches) {
       s << "patches-" << n << ":\n";
@@ -43,6 +44,7 @@ int run_blade(const BladeArgs& args) {
       }
     }
   });
+  out.commit();
   fmt::print("{}: {} triangles -> {}/blade.obj, lines -> {}/lines.yaml\n", what, b.mesh.faces.size(), args.out, args.out);
   return 0;
 }

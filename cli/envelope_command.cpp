@@ -6,6 +6,7 @@
 
 #include "cli/commands.h"
 #include "core/atomic_file.h"
+#include "pipeline/output_dir.h"
 #include "core/envelope.h"
 #include "core/errors.h"
 
@@ -39,7 +40,7 @@ int run_envelope(const EnvelopeArgs& args) {
     throw InputError(fmt::format("the envelope does not exist at {} grid points: the profile is too steep "
                                  "for this motion (lower --radius-end/--bulge)", grid.invalid_points));
 
-  std::filesystem::create_directories(args.out);
+  pipeline::OutputDir out(args.out);
   const std::string obj = args.out + "/envelope.obj", truth = args.out + "/truth.json";
   nlohmann::ordered_json j;
   j["generator"] = "flankcam envelope";
@@ -62,9 +63,10 @@ int run_envelope(const EnvelopeArgs& args) {
   auto& radius = j["radius"] = nlohmann::ordered_json::array();
   for (int k = 0; k < args.grid_s; ++k) radius.push_back(profile.d(double(k) / (args.grid_s - 1)));
 
-  write_obj(obj, grid.mesh,
+  write_obj(out.file("envelope.obj"), grid.mesh,
             fmt::format("exact envelope, profile {}, motion {}, L {} mm", args.profile, args.motion.kind, args.motion.length));
-  write_file_atomically(truth, [&](std::ostream& o) { o << j.dump(1) << '\n'; });
+  write_file_atomically(out.file("truth.json"), [&](std::ostream& o) { o << j.dump(1) << '\n'; });
+  out.commit();
   fmt::print("wrote {} ({} vertices, {} triangles, {} folded) and {}\n", obj, grid.mesh.vertices.size(),
              grid.mesh.faces.size(), grid.folded_triangles, truth);
   return 0;

@@ -496,7 +496,9 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     ceres::Solver::Options so;
     so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
     so.max_num_iterations = o.solver_iterations;
-    so.num_threads = o.threads;
+    // One thread: Ceres sums cost and gradient per thread, so the result would depend on the thread
+    // count in the last digits (issue 12). The footpoint queries around the solve use OpenMP.
+    so.num_threads = 1;
     so.logging_type = ceres::SILENT;
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);

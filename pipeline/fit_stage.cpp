@@ -1,18 +1,17 @@
-#include "cli/fit_stage.h"
+#include "pipeline/fit_stage.h"
 
 #include <fmt/format.h>
 
 #include <cmath>
 #include <optional>
 
-#include "core/atomic_file.h"
 #include "core/errors.h"
 #include "core/number_format.h"
 #include "postproc/apt.h"
 #include "postproc/report_svg.h"
 #include "postproc/tool_export.h"
 
-namespace flankcam::cli {
+namespace flankcam::pipeline {
 
 double round_mm(double x) { return std::isfinite(x) ? std::round(x * 1e6) / 1e6 + 0.0 : x; }  // + 0.0: no "-0"
 
@@ -66,7 +65,8 @@ ToolAssembly assembly_of(const Job& job, const Similarity& fr, const FitResult& 
   return a;
 }
 
-// Collision and gouge checks of every patch against the whole part (mm).
+}  // namespace
+
 void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   std::optional<LoadedMesh> separate;
   if (job.part != job.surface) separate = load_mesh(job.part.string());
@@ -99,7 +99,6 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
     for (const std::string& line : collision_summary(p)) progress(line);
   }
 }
-}  // namespace
 
 std::vector<std::string> collision_summary(const FittedPatch& p) {
   std::vector<std::string> out;
@@ -147,12 +146,6 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   }
   check_job(job, out, progress);
   return out;
-}
-
-std::vector<std::array<unsigned char, 3>> deviation_colors(const std::vector<double>& dev, double tol) {
-  std::vector<std::array<unsigned char, 3>> c(dev.size());
-  for (size_t i = 0; i < dev.size(); ++i) c[i] = deviation_color(dev[i], tol);
-  return c;
 }
 
 nlohmann::ordered_json surface_report(const Job& job, const FittedJob& f) {
@@ -268,60 +261,4 @@ ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p
   return cl;
 }
 
-std::vector<std::string> write_patch_files(const std::filesystem::path& out, const Job& job, const FittedJob& f,
-                                           const FittedPatch& p, const PatchOutputs& what) {
-  const Similarity& fr = f.frame;
-  const std::string& name = p.job->name;
-  const MachinedSurface& ms = p.fit.machined;
-  const auto to_mm = [&](std::vector<double> v) {
-    for (double& x : v) x = fr.length_to_mm(x);
-    return v;
-  };
-  const std::string tol = fmt::format("tolerance {} mm; deviation_mm > 0 undercut, < 0 overcut, nan not reached", job.tolerance_mm);
-
-  TriMesh omega = ms.omega.mesh;
-  for (auto& v : omega.vertices) v = fr.to_mm(v);
-  const std::vector<double> omega_dev = to_mm(ms.omega_deviation);
-  write_ply((out / (name + "-envelope.ply")).string(), omega, deviation_colors(omega_dev, job.tolerance_mm), omega_dev,
-            "deviation_mm", "machined envelope of patch " + name + "; " + tol);
-  const std::vector<double> design_dev = to_mm(ms.design_deviation);
-  write_ply((out / (name + "-deviation.ply")).string(), f.surface.mesh, deviation_colors(design_dev, job.tolerance_mm),
-            design_dev, "deviation_mm", "design surface vs patch " + name + "; " + tol);
-  std::vector<std::string> files = {name + "-envelope.ply", name + "-deviation.ply"};
-  const std::vector<Eigen::Vector2d>& profile = p.profile_mm;
-  if (what.tool) {
-    write_file_atomically((out / (name + "-tool.csv")).string(), [&](std::ostream& o) {
-      o << "# tool of patch " << name << ": meridian of a " << to_string(p.fit.fit.tool.shape)
-        << " tool, mm, z along the axis from the tip end\nz_mm,r_mm\n";
-      for (const Eigen::Vector2d& zr : profile) o << fixed(zr.x(), 6) << ',' << fixed(zr.y(), 6) << '\n';
-    });
-    const std::string title =
-        fmt::format("patch {}, {} tool, length {:.3f} mm", name, to_string(p.fit.fit.tool.shape), p.assembly.cutter_length());
-    write_tool_dxf((out / (name + "-tool.dxf")).string(), profile, title);
-    write_tool_stl((out / (name + "-tool.stl")).string(), profile, title);
-    files.insert(files.end(), {name + "-tool.csv", name + "-tool.dxf", name + "-tool.stl"});
-  }
-  if (what.program) {
-    if (what.apt) write_apt((out / (name + ".apt")).string(), *what.program), files.push_back(name + ".apt");
-    if (what.cl) {
-      write_file_atomically((out / (name + "-cl.csv")).string(), [&](std::ostream& o) { o << cl_csv(*what.program); });
-      files.push_back(name + "-cl.csv");
-    }
-  }
-
-  if (!p.collisions.clear()) {
-    TriMesh all;
-    for (const CollisionInterval& iv : p.collisions.intervals) {
-      const TriMesh one = assembly_mesh(p.assembly, p.poses[size_t(iv.worst_pose)]);
-      const int base = int(all.vertices.size());
-      all.vertices.insert(all.vertices.end(), one.vertices.begin(), one.vertices.end());
-      for (auto fc : one.faces) all.faces.push_back({fc[0] + base, fc[1] + base, fc[2] + base});
-    }
-    write_obj((out / (name + "-collisions.obj")).string(), all,
-              "patch " + name + ": tool assembly at the worst pose of each collision interval, mm");
-    files.push_back(name + "-collisions.obj");
-  }
-  return files;
-}
-
-}  // namespace flankcam::cli
+}  // namespace flankcam::pipeline

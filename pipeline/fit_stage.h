@@ -1,20 +1,19 @@
 // The fitting stage of a job, shared by `flankcam fit` and `flankcam run`: load the design surface,
-// fit every patch in the unit-diagonal frame, and turn the results back into millimetres
-// (report entries and per-patch files).
+// fit every patch in the unit-diagonal frame, check it against the part, and turn the results back
+// into millimetres (report entries, CL-data). Files are written by outputs.h.
 #pragma once
-#include <filesystem>
 #include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
 
-#include "cli/job.h"
+#include "pipeline/job.h"
 #include "core/mesh.h"
 #include "core/collision.h"
 #include "core/patch.h"
 #include "postproc/apt.h"
 
-namespace flankcam::cli {
+namespace flankcam::pipeline {
 
 using Progress = std::function<void(const std::string&)>;  // one line of progress (stderr)
 
@@ -35,10 +34,13 @@ struct FittedJob {
   std::vector<FittedPatch> patches;
 };
 
+// Loads the design surface, fits every patch in the unit-diagonal frame (paper Sec. 4) and runs
+// check_job. The OpenMP loops use however many threads the caller set (see run.h).
 [[nodiscard]] FittedJob fit_job(const Job& job, int threads, const Progress& progress);
 
-// Per-vertex deviation colours (postproc's deviation_color).
-[[nodiscard]] std::vector<std::array<unsigned char, 3>> deviation_colors(const std::vector<double>& dev_mm, double tol_mm);
+// Poses in mm, tool assembly, meridian, contact points and the collision and gouge checks of
+// every fitted patch against the whole part (job.part, default the design surface).
+void check_job(const Job& job, FittedJob& fitted, const Progress& progress);
 
 // Rounds a length in mm to 1 nm for reports (stable text, no spurious digits).
 [[nodiscard]] double round_mm(double x);
@@ -54,15 +56,4 @@ struct FittedJob {
 // meridian in mm; a comment with the fitted error and one flagging allowed collisions.
 [[nodiscard]] ClProgram patch_program(const Job& job, const FittedJob& fitted, const FittedPatch& patch, int tool);
 
-struct PatchOutputs {
-  const ClProgram* program = nullptr;  // CL-data (none for a colliding patch unless collisions are allowed)
-  bool apt = true, cl = true, tool = true;
-};
-// Files of a fitted patch in `out`: NAME-envelope.ply (Ω with its deviation from Φ), NAME-deviation.ply
-// (Φ with its deviation from Ω); with `tool`, NAME-tool.csv (meridian z, r in mm), NAME-tool.dxf and
-// NAME-tool.stl; with a `program`, NAME.apt (APT CL-data) and NAME-cl.csv; when it collides,
-// NAME-collisions.obj (the assembly at the worst pose of each interval). Returns the file names.
-std::vector<std::string> write_patch_files(const std::filesystem::path& out, const Job& job, const FittedJob& fitted,
-                                           const FittedPatch& patch, const PatchOutputs& what);
-
-}  // namespace flankcam::cli
+}  // namespace flankcam::pipeline

@@ -1,4 +1,4 @@
-#include "cli/job.h"
+#include "pipeline/job.h"
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
@@ -11,16 +11,30 @@
 #include "core/yaml_fields.h"
 #include "postproc/nc_program.h"
 
-namespace flankcam::cli {
+namespace flankcam::pipeline {
 
 namespace {
 
 using Reader = YamlFields<InputError>;
 
+// Sane ranges of job values: beyond them a value is a typo or a unit mistake, and would post
+// nonsense (F0.0000, a 301-digit S word) or make the fit run for hours.
+constexpr double max_length_mm = 1e5;       // 100 m: lengths of tool, holder, moves
+constexpr double max_coordinate_mm = 1e6;   // 1 km: line end points, setup translation
+constexpr int max_samples_s = 200, max_samples_t = 2000, max_samples = 60000;  // 20x the paper's 30 x 100
+
+// A number in [lo, hi] (unit for the message).
+double in_range(const Reader& r, const YAML::Node& n, const std::string& key, double lo, double hi, const char* unit) {
+  const double v = r.number(n, key);
+  if (!(v >= lo && v <= hi)) r.fail(n, key, fmt::format("must be in {} .. {}{}{}, got {}", lo, hi, *unit ? " " : "", unit, n.Scalar()));
+  return v;
+}
+
 std::array<double, 6> read_line(const Reader& r, const YAML::Node& n, const std::string& key) {
   if (!n.IsSequence() || n.size() != 6) r.fail(n, key, "expected 6 numbers [ax, ay, az, bx, by, bz] (mm)");
   std::array<double, 6> l{};
-  for (size_t k = 0; k < 6; ++k) l[k] = r.number(n[k], fmt::format("{}[{}]", key, k));
+  for (size_t k = 0; k < 6; ++k)
+    l[k] = in_range(r, n[k], fmt::format("{}[{}]", key, k), -max_coordinate_mm, max_coordinate_mm, "mm");
   return l;
 }
 
@@ -66,7 +80,7 @@ PatchJob read_patch(const Reader& r, const YAML::Node& p, const std::string& key
       r.fail(job.init == PatchInit::Line ? p["line"] : p["lines"][k], key, "a line has zero length (a = b)");
   }
   if (p["rail"]) job.rail = r.integer(p["rail"], key + ".rail", 0, 1);
-  if (p["length"]) job.length_mm = r.positive(p["length"], key + ".length");
+  if (p["length"]) job.length_mm = in_range(r, p["length"], key + ".length", 1e-3, max_length_mm, "mm");
   return job;
 }
 
@@ -79,7 +93,9 @@ void read_post(const Reader& r, const YAML::Node& p, PostJob& post) {
       const YAML::Node n = s[key];
       if (!n) return;
       if (!n.IsSequence() || n.size() != 3) r.fail(n, std::string("post.setup.") + key, "expected 3 numbers");
-      for (size_t k = 0; k < 3; ++k) v[k] = r.number(n[k], fmt::format("post.setup.{}[{}]", key, k));
+      const double bound = std::string(key) == "rotate" ? 360 : max_coordinate_mm;
+      for (size_t k = 0; k < 3; ++k)
+        v[k] = in_range(r, n[k], fmt::format("post.setup.{}[{}]", key, k), -bound, bound, key == std::string("rotate") ? "deg" : "mm");
     };
     vec("rotate", post.setup_rotate_deg);
     vec("translate", post.setup_translate_mm);
@@ -101,10 +117,10 @@ void read_post(const Reader& r, const YAML::Node& p, PostJob& post) {
   if (p["cl"]) post.cl = r.boolean(p["cl"], "post.cl");
   if (p["tool"]) post.tool = r.boolean(p["tool"], "post.tool");
   if (p["line_numbers"]) post.line_numbers = r.boolean(p["line_numbers"], "post.line_numbers");
-  if (p["tolerance"]) post.tolerance_mm = r.positive(p["tolerance"], "post.tolerance");
-  if (p["angle_tolerance"]) post.angle_tolerance_deg = r.positive(p["angle_tolerance"], "post.angle_tolerance");
-  if (p["tool_length"]) post.tool_length_mm = r.positive(p["tool_length"], "post.tool_length");
-  if (p["safe_height"]) post.safe_height_mm = r.non_negative(p["safe_height"], "post.safe_height");
+  if (p["tolerance"]) post.tolerance_mm = in_range(r, p["tolerance"], "post.tolerance", 1e-5, 10, "mm");
+  if (p["angle_tolerance"]) post.angle_tolerance_deg = in_range(r, p["angle_tolerance"], "post.angle_tolerance", 1e-4, 10, "deg");
+  if (p["tool_length"]) post.tool_length_mm = in_range(r, p["tool_length"], "post.tool_length", 1e-3, max_length_mm, "mm");
+  if (p["safe_height"]) post.safe_height_mm = in_range(r, p["safe_height"], "post.safe_height", 0, max_length_mm, "mm");
 }
 
 }  // namespace
@@ -136,7 +152,7 @@ Job read_job(const std::filesystem::path& file) {
     r.only_keys(h, "holder", {"shank_length", "shank_diameter", "length", "diameter", "diameter_far", "cylinder_length"});
     HolderJob& hj = job.holder;
     const auto get = [&](const char* key, double& v) {
-      if (h[key]) v = r.non_negative(h[key], std::string("holder.") + key);
+      if (h[key]) v = in_range(r, h[key], std::string("holder.") + key, 0, max_length_mm, "mm");
     };
     get("shank_length", hj.shank_length), get("shank_diameter", hj.shank_diameter), get("length", hj.length);
     get("diameter", hj.diameter), get("diameter_far", hj.diameter_far), get("cylinder_length", hj.cylinder_length);
@@ -144,37 +160,60 @@ Job read_job(const std::filesystem::path& file) {
     if (hj.shank_length > 0 && !(hj.shank_diameter > 0)) r.fail(h, "holder.shank_diameter", "must be > 0 with a shank");
     if (hj.length + hj.cylinder_length > 0 && !(hj.diameter > 0)) r.fail(h, "holder.diameter", "must be > 0 with a holder");
   }
-  if (root["clearance"]) job.clearance_mm = r.positive(root["clearance"], "clearance");
-  if (root["feed"]) job.feed_mm_min = r.positive(root["feed"], "feed");
-  if (root["spindle"]) job.spindle_rpm = r.positive(root["spindle"], "spindle");
-  if (root["lead_in"]) job.lead_in_mm = r.non_negative(root["lead_in"], "lead_in");
-  if (root["retract"]) job.retract_mm = r.positive(root["retract"], "retract");
+  if (root["clearance"]) job.clearance_mm = in_range(r, root["clearance"], "clearance", 0.01, 1000, "mm");
+  if (root["feed"]) job.feed_mm_min = in_range(r, root["feed"], "feed", 0.01, 1e5, "mm/min");
+  if (root["spindle"]) job.spindle_rpm = in_range(r, root["spindle"], "spindle", 1, 2e5, "rpm");
+  if (root["lead_in"]) job.lead_in_mm = in_range(r, root["lead_in"], "lead_in", 0, max_length_mm, "mm");
+  if (root["retract"]) job.retract_mm = in_range(r, root["retract"], "retract", 1e-3, max_length_mm, "mm");
   if (job.retract_mm < job.lead_in_mm) r.fail(root["retract"] ? root["retract"] : root, "retract", "must be >= lead_in");
   if (const YAML::Node t = root["tool"]) {
     r.only_keys(t, "tool", {"shape", "control_points"});
     if (t["shape"]) job.fit.shape = read_shape(r, t["shape"]);
-    if (t["control_points"]) job.fit.meridian_control_points = r.integer(t["control_points"], "tool.control_points", 4, 100);
+    if (t["control_points"]) job.fit.meridian_control_points = r.integer(t["control_points"], "tool.control_points", 4, max_samples_s);
   }
-  if (root["tolerance"]) job.tolerance_mm = r.positive(root["tolerance"], "tolerance");
+  if (root["tolerance"]) job.tolerance_mm = in_range(r, root["tolerance"], "tolerance", 1e-5, 100, "mm");
   if (const YAML::Node s = root["sampling"]) {
     r.only_keys(s, "sampling", {"s", "t"});
-    if (s["s"]) job.fit.samples_s = r.integer(s["s"], "sampling.s", 4, 1000);
-    if (s["t"]) job.fit.samples_t = r.integer(s["t"], "sampling.t", 8, 100000);
+    if (s["s"]) job.fit.samples_s = r.integer(s["s"], "sampling.s", 4, max_samples_s);
+    if (s["t"]) job.fit.samples_t = r.integer(s["t"], "sampling.t", 8, max_samples_t);
+    if (job.fit.samples_s * job.fit.samples_t > max_samples)
+      r.fail(s, "sampling", fmt::format("s x t = {} samples, at most {} (the fit's time grows with it; the paper uses 30 x 100)",
+                                        job.fit.samples_s * job.fit.samples_t, max_samples));
   }
   if (const YAML::Node w = root["weights"]) {
     r.only_keys(w, "weights", {"plane", "fair", "point", "rigid", "anchor"});
-    if (w["plane"]) job.fit.w_plane = r.non_negative(w["plane"], "weights.plane");
-    if (w["fair"]) job.fit.w_fair = r.non_negative(w["fair"], "weights.fair");
-    if (w["point"]) job.fit.w_point = r.non_negative(w["point"], "weights.point");
-    if (w["rigid"]) job.fit.w_rigid = r.non_negative(w["rigid"], "weights.rigid");
-    if (w["anchor"]) job.fit.w_anchor = r.non_negative(w["anchor"], "weights.anchor");
+    if (w["plane"]) job.fit.w_plane = in_range(r, w["plane"], "weights.plane", 0, 1e6, "");
+    if (w["fair"]) job.fit.w_fair = in_range(r, w["fair"], "weights.fair", 0, 1e6, "");
+    if (w["point"]) job.fit.w_point = in_range(r, w["point"], "weights.point", 0, 1e6, "");
+    if (w["rigid"]) job.fit.w_rigid = in_range(r, w["rigid"], "weights.rigid", 0, 1e6, "");
+    if (w["anchor"]) job.fit.w_anchor = in_range(r, w["anchor"], "weights.anchor", 0, 1e6, "");
   }
   if (const YAML::Node f = root["fit"]) {
     r.only_keys(f, "fit", {"iterations", "rail_control_points", "robust"});
     if (f["iterations"]) job.fit.max_iterations = r.integer(f["iterations"], "fit.iterations", 1, 1000);
     if (f["rail_control_points"])
       job.fit.rail_control_points = r.integer(f["rail_control_points"], "fit.rail_control_points", 4, 1000);
-    if (f["robust"]) job.robust_mm = r.non_negative(f["robust"], "fit.robust");
+    if (f["robust"]) job.robust_mm = in_range(r, f["robust"], "fit.robust", 0, max_length_mm, "mm");
+  }
+  // Limits that tie two keys together, reported at the key the user would change.
+  if (const YAML::Node w = root["weights"]; w && !(job.fit.w_plane > 0 || job.fit.w_point > 0))
+    r.fail(w, "weights", "plane or point must be > 0 (otherwise nothing pulls the tool to the surface)");
+  const YAML::Node sampling = root["sampling"];
+  if (root["tool"] && root["tool"]["control_points"] && job.fit.meridian_control_points > job.fit.samples_s)
+    r.fail(root["tool"]["control_points"], "tool.control_points",
+           fmt::format("{} is more than sampling.s = {} (one sample per control point at least)",
+                       job.fit.meridian_control_points, job.fit.samples_s));
+  if (job.fit.meridian_control_points > job.fit.samples_s)
+    r.fail(sampling ? sampling : root, "sampling.s",
+           fmt::format("{} is less than tool.control_points = {}", job.fit.samples_s, job.fit.meridian_control_points));
+  const YAML::Node rail = root["fit"] ? root["fit"]["rail_control_points"] : YAML::Node();
+  if (2 * job.fit.rail_control_points > job.fit.samples_t) {
+    if (rail)
+      r.fail(rail, "fit.rail_control_points",
+             fmt::format("{} is more than half of sampling.t = {}", job.fit.rail_control_points, job.fit.samples_t));
+    r.fail(sampling ? sampling : root, "sampling.t",
+           fmt::format("{} is less than twice fit.rail_control_points = {} (default 16)", job.fit.samples_t,
+                       job.fit.rail_control_points));
   }
   if (auto err = job.fit.validate(); !err.empty()) throw InputError(name + ": " + err);
   if (root["machine"]) job.machine = r.text(root["machine"], "machine");
@@ -188,4 +227,4 @@ Job read_job(const std::filesystem::path& file) {
   return job;
 }
 
-}  // namespace flankcam::cli
+}  // namespace flankcam::pipeline

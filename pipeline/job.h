@@ -11,7 +11,7 @@
 #include "core/fitting.h"
 #include "core/patch.h"
 
-namespace flankcam::cli {
+namespace flankcam::pipeline {
 
 struct PatchJob {
   std::string name;
@@ -61,4 +61,4 @@ struct Job {
 // missing files.
 [[nodiscard]] Job read_job(const std::filesystem::path& file);
 
-}  // namespace flankcam::cli
+}  // namespace flankcam::pipeline

@@ -1,23 +1,25 @@
-#include "cli/post_stage.h"
+#include "pipeline/post_stage.h"
 
 #include <fmt/format.h>
 
 #include <algorithm>
 
 #include "core/errors.h"
+#include "pipeline/data_dir.h"
 #include "postproc/gcode.h"
 
-namespace flankcam::cli {
+namespace flankcam::pipeline {
 
 Machine find_machine(const std::string& name_or_path, const std::filesystem::path& relative_to) {
   namespace fs = std::filesystem;
   const fs::path given(name_or_path);
   for (const fs::path& p : {given, relative_to / given})
     if (!p.empty() && fs::is_regular_file(p)) return load_machine(p.string());
-  const fs::path shipped = fs::path(FLANKCAM_MACHINES_DIR) / (name_or_path + ".yaml");
+  const fs::path dir = machines_dir();
+  const fs::path shipped = dir / (name_or_path + ".yaml");
   if (fs::is_regular_file(shipped)) return load_machine(shipped.string());
   std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(FLANKCAM_MACHINES_DIR))
+  for (const auto& e : fs::directory_iterator(dir))
     if (e.path().extension() == ".yaml") names.push_back(e.path().stem().string());
   std::sort(names.begin(), names.end());
   throw InputError(fmt::format("machine '{}': no such file, and not one of the shipped machines ({})", name_or_path,
@@ -25,13 +27,14 @@ Machine find_machine(const std::string& name_or_path, const std::filesystem::pat
 }
 
 namespace {
-WrittenProgram summarize(const Posted& posted, const std::string& file, const std::string& patch, Dialect d) {
-  WrittenProgram w;
+PostedProgram summarize(Posted posted, const std::string& file, const std::string& patch, Dialect d) {
+  PostedProgram w;
   w.file = file;
   w.patch = patch;
   w.dialect = d;
+  w.posted = std::move(posted);
   w.rotary_range = {{{1e300, -1e300}, {1e300, -1e300}}};
-  for (const PostedSection& s : posted.sections) {
+  for (const PostedSection& s : w.posted.sections) {
     w.inserted += s.path.inserted;
     w.slowed += s.slowed_blocks;
     w.singular += int(s.path.singular.size());
@@ -40,7 +43,7 @@ WrittenProgram summarize(const Posted& posted, const std::string& file, const st
       for (size_t k = 0; k < 2; ++k)
         w.rotary_range[k] = {std::min(w.rotary_range[k][0], j.rotary[k]), std::max(w.rotary_range[k][1], j.rotary[k])};
   }
-  for (const NcBlock& b : posted.program.blocks)
+  for (const NcBlock& b : w.posted.program.blocks)
     if (const auto* m = std::get_if<NcMove>(&b)) {
       ++w.moves;
       for (size_t k = 0; k < 2; ++k) w.rotary_deg[k].push_back(m->at.rotary[k]);
@@ -50,42 +53,33 @@ WrittenProgram summarize(const Posted& posted, const std::string& file, const st
 }
 }  // namespace
 
-std::vector<WrittenProgram> write_programs(const std::filesystem::path& out, const Machine& m,
-                                           const std::vector<PostInput>& inputs, const std::string& all_name,
-                                           const PostSettings& settings, const std::vector<std::string>& header) {
-  std::vector<Dialect> dialects = settings.dialects;
-  if (dialects.empty()) dialects.push_back(parse_dialect(m.controller.dialect));
-  // Build every program before writing any, so an unreachable patch leaves no files behind.
-  struct Pending {
-    std::string file, patch;
-    Dialect dialect;
-    Posted posted;
-  };
-  std::vector<Pending> pending;
-  for (const Dialect d : dialects) {
+std::vector<Dialect> dialects_of(const Machine& m, const PostSettings& settings) {
+  if (!settings.dialects.empty()) return settings.dialects;
+  return {parse_dialect(m.controller.dialect)};
+}
+
+std::vector<PostedProgram> post_programs(const Machine& m, const std::vector<PostInput>& inputs, const std::string& all_name,
+                                         const PostSettings& settings, const std::vector<std::string>& header) {
+  std::vector<PostedProgram> out;
+  for (const Dialect d : dialects_of(m, settings)) {
     PostOptions o = settings.options;
     o.dialect = d;
     int number = 1;
     for (const PostInput& in : inputs) {
       Posted p = post({in}, m, o, in.patch, header);
       p.program.number = number++;
-      pending.push_back({in.patch + file_extension(d), in.patch, d, std::move(p)});
+      out.push_back(summarize(std::move(p), in.patch + file_extension(d), in.patch, d));
     }
     if (inputs.size() > 1) {
       Posted p = post(inputs, m, o, all_name, header);
       p.program.number = number;
-      pending.push_back({all_name + file_extension(d), "", d, std::move(p)});
+      out.push_back(summarize(std::move(p), all_name + file_extension(d), "", d));
     }
   }
-  std::vector<WrittenProgram> written;
-  for (const Pending& p : pending) {
-    write_nc((out / p.file).string(), p.posted.program, {p.dialect, settings.line_numbers, settings.options.path.tolerance_mm});
-    written.push_back(summarize(p.posted, p.file, p.patch, p.dialect));
-  }
-  return written;
+  return out;
 }
 
-nlohmann::ordered_json program_report(const WrittenProgram& w, const Machine& m) {
+nlohmann::ordered_json program_report(const PostedProgram& w, const Machine& m) {
   nlohmann::ordered_json j;
   j["file"] = w.file;
   j["dialect"] = to_string(w.dialect);
@@ -101,4 +95,4 @@ nlohmann::ordered_json program_report(const WrittenProgram& w, const Machine& m)
   return j;
 }
 
-}  // namespace flankcam::cli
+}  // namespace flankcam::pipeline

@@ -155,7 +155,7 @@ TEST_CASE("flankcam fit: job errors name the key and line, exit 2 and write noth
       {"unknown key", head + "tool: {shape: cone, lenght: 3}\n" + patch, "job.yaml:2: tool.lenght: unknown key"},
       {"unknown shape", head + "tool: {shape: ball}\n" + patch, "job.yaml:2: tool.shape: unknown shape 'ball'"},
       {"wrong type", head + "tolerance: fine\n" + patch, "job.yaml:2: tolerance: expected a number, got 'fine'"},
-      {"negative", head + "tolerance: -1\n" + patch, "job.yaml:2: tolerance: must be > 0"},
+      {"negative", head + "tolerance: -1\n" + patch, "job.yaml:2: tolerance: must be in 1e-05 .. 100 mm, got -1"},
       {"nan", head + "patches:\n  - name: p\n    init: line\n    line: [0, 0, .nan, 0, 0, 9]\n",
        "job.yaml:5: patches[0].line[2]: must be finite"},
       {"five numbers", head + "patches:\n  - name: p\n    init: line\n    line: [0, 0, 0, 0, 9]\n",
@@ -167,7 +167,7 @@ TEST_CASE("flankcam fit: job errors name the key and line, exit 2 and write noth
        "job.yaml:6: patches[1].name: duplicate patch name 'p'"},
       {"unsafe name", head + "patches:\n  - name: ../x\n    init: line\n    line: [0, 0, 1, 0, 0, 9]\n",
        "patches[0].name: use letters"},
-      {"sampling", head + "sampling: {s: 2}\n" + patch, "job.yaml:2: sampling.s: expected a whole number in 4..1000"},
+      {"sampling", head + "sampling: {s: 2}\n" + patch, "job.yaml:2: sampling.s: expected a whole number in 4..200"},
       {"yaml syntax", head + "tool: {shape: cone\n" + patch, "job.yaml:"},
   };
   for (const auto& c : cases) {

@@ -1,0 +1,194 @@
+#include "pipeline/run.h"
+
+#include <fmt/format.h>
+#include <omp.h>
+
+#include <Eigen/Geometry>
+
+#include "core/errors.h"
+#include "pipeline/output_dir.h"
+
+namespace flankcam::pipeline {
+
+std::string RunOptions::validate() const {
+  if (threads < 1 || threads > 256) return "threads: 1 .. 256";
+  return {};
+}
+
+ThreadScope::ThreadScope(int threads) : previous_(omp_get_max_threads()) { omp_set_num_threads(threads); }
+ThreadScope::~ThreadScope() { omp_set_num_threads(previous_); }
+
+int FitRun::colliding() const {
+  int n = 0;
+  for (const FittedPatch& p : fitted.patches) n += !p.collisions.clear();
+  return n;
+}
+
+namespace {
+// The files `fit` writes per patch (outputs.h), also written by `run`.
+void plan_fit_files(const Job& job, const std::string& name, bool tool, bool apt, bool cl, OutputPlan& plan) {
+  const std::string owner = "patch " + name;
+  for (const char* suffix : {"-envelope.ply", "-deviation.ply", "-collisions.obj"}) plan.add(name + suffix, owner);
+  if (tool)
+    for (const char* suffix : {"-tool.csv", "-tool.dxf", "-tool.stl"}) plan.add(name + suffix, owner);
+  if (apt) plan.add(name + ".apt", owner);
+  if (cl) plan.add(name + "-cl.csv", owner);
+  (void)job;
+}
+
+void check_options(const RunOptions& o) {
+  if (auto err = o.validate(); !err.empty()) throw InputError(err);
+}
+
+PostSettings settings_of(const Job& job) {
+  PostSettings s;
+  for (const std::string& d : job.post.dialects) s.dialects.push_back(parse_dialect(d));
+  s.line_numbers = job.post.line_numbers;
+  s.options.path.tolerance_mm = job.post.tolerance_mm;
+  s.options.path.angle_tolerance_deg = job.post.angle_tolerance_deg;
+  s.options.safe_height_mm = job.post.safe_height_mm;
+  return s;
+}
+
+// Fit and check every patch; CL-data for those allowed to run, tool numbers from `tool_of`.
+template <class ToolOf>
+FitRun fit_run(Job job, const RunOptions& o, ToolOf tool_of) {
+  check_options(o);
+  const ThreadScope threads(o.threads);
+  FitRun r;
+  r.job = std::move(job);
+  r.allow_collisions = o.allow_collisions;
+  r.fitted = fit_job(r.job, o.threads, o.progress);
+  r.cl_data.resize(r.fitted.patches.size());
+  for (size_t k = 0; k < r.fitted.patches.size(); ++k) {
+    const FittedPatch& p = r.fitted.patches[k];
+    if (p.collisions.clear() || o.allow_collisions) r.cl_data[k] = patch_program(r.job, r.fitted, p, tool_of(k));
+  }
+  return r;
+}
+}  // namespace
+
+void check_fit_outputs(const Job& job) {
+  OutputPlan plan;
+  plan.add("report.json", "the report");
+  for (const PatchJob& p : job.patches) plan_fit_files(job, p.name, true, true, true, plan);
+}
+
+Machine check_run(const Job& job) {
+  if (job.machine.empty())
+    throw InputError(job.file.string() + ": machine: missing (flankcam run needs a machine file or one of machines/)");
+  Machine machine = find_machine(job.machine, job.file.parent_path());
+  const PostSettings settings = settings_of(job);
+  OutputPlan plan;
+  plan.add("report.json", "the report");
+  plan.add("report.html", "the report");
+  const std::vector<Dialect> dialects = dialects_of(machine, settings);
+  for (const PatchJob& p : job.patches) {
+    plan_fit_files(job, p.name, job.post.tool, job.post.apt, job.post.cl, plan);
+    for (const char* suffix : {"-deviation.svg", "-tool.svg", "-angles.svg"}) plan.add(p.name + suffix, "patch " + p.name);
+    for (const Dialect d : dialects) plan.add(p.name + file_extension(d), "the NC program of patch " + p.name);
+  }
+  if (job.patches.size() > 1)
+    for (const Dialect d : dialects) plan.add(all_patches_name + file_extension(d), "the program of all patches in order");
+  return machine;
+}
+
+FitRun fit(Job job, const RunOptions& options) {
+  check_fit_outputs(job);
+  return fit_run(std::move(job), options, [](size_t) { return 1; });
+}
+
+ToolPose to_work(const PostJob& post, const ToolPose& p) {
+  constexpr double deg = M_PI / 180;
+  const Eigen::Matrix3d R = (Eigen::AngleAxisd(post.setup_rotate_deg[2] * deg, Eigen::Vector3d::UnitZ()) *
+                             Eigen::AngleAxisd(post.setup_rotate_deg[1] * deg, Eigen::Vector3d::UnitY()) *
+                             Eigen::AngleAxisd(post.setup_rotate_deg[0] * deg, Eigen::Vector3d::UnitX()))
+                                .toRotationMatrix();
+  const Eigen::Vector3d t(post.setup_translate_mm[0], post.setup_translate_mm[1], post.setup_translate_mm[2]);
+  return {R * p.tip + t, (R * p.axis).normalized()};
+}
+
+double tool_length(const Job& job, const FittedPatch& p) {
+  if (job.post.tool_length_mm > 0) return job.post.tool_length_mm;
+  return job.holder.length + job.holder.cylinder_length + job.holder.shank_length + p.assembly.cutter_length();
+}
+
+RunResult run(Job job, Machine machine, const RunOptions& options) {
+  RunResult r;
+  r.settings = settings_of(job);
+  r.fit = fit_run(std::move(job), options, [](size_t k) { return int(k) + 1; });
+  r.machine = std::move(machine);
+  const Job& j = r.fit.job;
+  const ThreadScope threads(options.threads);
+  // Kinematics and programs for every patch allowed to run, all solved before any file is written:
+  // an unreachable pose ends the run with nothing half done.
+  std::vector<PostInput> inputs;  // work coordinates
+  for (size_t k = 0; k < r.fit.fitted.patches.size(); ++k) {
+    const FittedPatch& p = r.fit.fitted.patches[k];
+    r.tool_length_mm.push_back(tool_length(j, p));
+    if (!r.fit.cl_data[k]) continue;
+    ClProgram work = *r.fit.cl_data[k];
+    for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
+    inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back()});
+  }
+  if (inputs.empty()) return r;
+  const Machine& m = r.machine;
+  options.progress(fmt::format("kinematics and post: {} patch(es) on {} ({})", inputs.size(), m.name, m.kind()));
+  r.programs = post_programs(
+      m, inputs, all_patches_name, r.settings,
+      {fmt::format("flankcam run of {}", j.file.filename().string()), fmt::format("machine {} ({}), units mm", m.name, m.kind()),
+       fmt::format("linearisation tolerance {} mm, {} deg", j.post.tolerance_mm, j.post.angle_tolerance_deg),
+       fmt::format("work frame = part rotated X {} Y {} Z {} deg, moved by ({}, {}, {}) mm", j.post.setup_rotate_deg[0],
+                   j.post.setup_rotate_deg[1], j.post.setup_rotate_deg[2], j.post.setup_translate_mm[0],
+                   j.post.setup_translate_mm[1], j.post.setup_translate_mm[2])});
+  return r;
+}
+
+PostRun check_post(const PostRequest& req) {
+  PostRun r;
+  r.request = req;
+  r.machine = find_machine(req.machine);
+  const Machine& m = r.machine;
+  const bool head = m.rotary[0].carries == Carrier::Head || m.rotary[1].carries == Carrier::Head;
+  if (head && !(req.tool_length_mm > 0))
+    throw InputError(fmt::format("--tool-length: machine {} turns the head; give the tool's length from the spindle "
+                                 "nose to the tip (mm)",
+                                 m.name));
+  if (!req.dialect.empty()) r.settings.dialects = {parse_dialect(req.dialect)};
+  r.settings.line_numbers = req.line_numbers;
+  r.settings.options.path.tolerance_mm = req.tolerance_mm;
+  r.settings.options.path.tool_length_mm = req.tool_length_mm;
+  r.settings.options.safe_height_mm = req.safe_height_mm;
+  // Every program gets its own file: PATCH.EXT from the APT file's stem, ALL.EXT from --name.
+  check_file_name(req.name, "--name");
+  OutputPlan plan;
+  const std::vector<Dialect> dialects = dialects_of(m, r.settings);
+  for (const std::string& file : req.apt) {
+    const std::string stem = std::filesystem::path(file).stem().string();
+    const std::string owner = "the program of " + file;
+    check_file_name(stem, file);
+    for (const Dialect d : dialects) plan.add(stem + file_extension(d), owner);
+    plan.add(stem + "-tool.stl", "the tool of " + file);
+  }
+  if (req.apt.size() > 1)
+    for (const Dialect d : dialects) plan.add(req.name + file_extension(d), "the program of all files in order (--name)");
+  return r;
+}
+
+PostRun post_apt(PostRun r) {
+  const PostRequest& req = r.request;
+  for (const std::string& file : req.apt) {
+    PostInput in;
+    in.cl = read_apt(file);
+    in.patch = std::filesystem::path(file).stem().string();
+    in.tool_length_mm = req.tool_length_mm;
+    r.inputs.push_back(std::move(in));
+  }
+  r.programs = post_programs(
+      r.machine, r.inputs, req.name, r.settings,
+      {fmt::format("flankcam post for machine {} ({}), units mm", r.machine.name, r.machine.kind()),
+       fmt::format("linearisation tolerance {} mm, {} deg", req.tolerance_mm, r.settings.options.path.angle_tolerance_deg)});
+  return r;
+}
+
+}  // namespace flankcam::pipeline

@@ -1,0 +1,101 @@
+// The pipeline as a library: job in, results out. Each command is one function returning a struct
+// that keeps everything the reports and files need (the job, the fitted patches, the CL-data, the
+// posted programs); outputs.h writes those files. Nothing here prints: progress goes to a callback.
+//   fit:  read job -> fit -> check                          (flankcam fit)
+//   run:  read job -> fit -> check -> kinematics -> post    (flankcam run)
+//   post: APT files -> kinematics -> post                   (flankcam post)
+#pragma once
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "kinematics/machine.h"
+#include "pipeline/fit_stage.h"
+#include "pipeline/job.h"
+#include "pipeline/post_stage.h"
+#include "postproc/apt.h"
+
+namespace flankcam::pipeline {
+
+struct RunOptions {
+  int threads = 2;                // Ceres is single-threaded (deterministic); OpenMP loops use these
+  bool allow_collisions = false;  // CL-data and programs even for patches that collide or gouge
+  Progress progress = [](const std::string&) {};
+  std::string validate() const;   // empty when valid
+};
+
+// Sets the OpenMP thread count for the lifetime of the object and restores the previous one.
+class ThreadScope {
+ public:
+  explicit ThreadScope(int threads);
+  ~ThreadScope();
+  ThreadScope(const ThreadScope&) = delete;
+  ThreadScope& operator=(const ThreadScope&) = delete;
+ private:
+  int previous_;
+};
+
+// `flankcam fit`: the job, its fitted patches and their CL-data (tool 1, part coordinates; none
+// for a colliding patch unless collisions are allowed). Move-only: fitted.patches point into job.
+struct FitRun {
+  Job job;
+  FittedJob fitted;
+  std::vector<std::optional<ClProgram>> cl_data;  // per patch
+  bool allow_collisions = false;
+  [[nodiscard]] int colliding() const;            // patches that collide or gouge
+  FitRun() = default;
+  FitRun(FitRun&&) = default;
+  FitRun& operator=(FitRun&&) = default;
+  FitRun(const FitRun&) = delete;
+};
+
+// `flankcam run`: the fit (CL-data with tool numbers 1, 2, ... per patch), the machine, and the
+// posted programs (per dialect: one per allowed patch, then all-patches when more than one).
+struct RunResult {
+  FitRun fit;
+  Machine machine;
+  PostSettings settings;
+  std::vector<PostedProgram> programs;
+  std::vector<double> tool_length_mm;  // per patch, spindle nose to tip
+};
+
+// The name of the program that runs all patches of `flankcam run` in order.
+inline const std::string all_patches_name = "all-patches";
+
+// Everything about a job that can be refused before the fit: the machine (run), the dialects,
+// and output file names that would clash (e.g. a patch named all-patches). Throws InputError.
+void check_fit_outputs(const Job& job);
+[[nodiscard]] Machine check_run(const Job& job);
+
+[[nodiscard]] FitRun fit(Job job, const RunOptions& options);
+// `machine`: from check_run. Throws InputError when a pose is out of the machine's reach.
+[[nodiscard]] RunResult run(Job job, Machine machine, const RunOptions& options);
+
+// The part's placement on the machine (post.setup): part frame -> work frame.
+[[nodiscard]] ToolPose to_work(const PostJob& post, const ToolPose& p);
+// Spindle nose to tip: post.tool_length, else holder + shank + cutter lengths.
+[[nodiscard]] double tool_length(const Job& job, const FittedPatch& p);
+
+// `flankcam post`: APT files through a machine.
+struct PostRequest {
+  std::vector<std::string> apt;   // files, one program each
+  std::string machine;            // file or shipped name
+  std::string dialect;            // empty: the machine's
+  std::string name = "all";       // the all-files program
+  double tool_length_mm = 0, tolerance_mm = 0.005, safe_height_mm = 10;
+  bool line_numbers = false;
+};
+struct PostRun {
+  PostRequest request;
+  Machine machine;
+  PostSettings settings;
+  std::vector<PostInput> inputs;
+  std::vector<PostedProgram> programs;
+};
+// Refuses a bad machine, dialect, tool length or clashing output names before any APT is read.
+[[nodiscard]] PostRun check_post(const PostRequest& request);
+// Reads the APT files and posts them (`checked` from check_post).
+[[nodiscard]] PostRun post_apt(PostRun checked);
+
+}  // namespace flankcam::pipeline

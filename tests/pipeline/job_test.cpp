@@ -1,0 +1,85 @@
+#include <doctest/doctest.h>
+
+#include <string>
+
+#include "core/errors.h"
+#include "pipeline/job.h"
+#include "tests/test_util.h"
+
+using namespace flankcam;
+
+namespace {
+const char* patch = "patches:\n  - name: p\n    init: line\n    line: [0, 0, 0, 0, 0, 10]\n";
+
+// The InputError message read_job gives for a job whose first line is `first`.
+std::string error_of(const test::ScratchDir& dir, const std::string& first) {
+  test::write_text(dir.file("s.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  test::write_text(dir.file("job.yaml"), first + "\nsurface: s.obj\n" + patch);
+  try {
+    (void)pipeline::read_job(dir.file("job.yaml"));
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "(accepted)";
+}
+}  // namespace
+
+TEST_CASE("read_job bounds every value and names the file, line and key with the bound") {
+  test::ScratchDir dir("job-ranges");
+  const struct {
+    const char* yaml;
+    const char* message;
+  } cases[] = {
+      {"feed: 1e-300", "job.yaml:1: feed: must be in 0.01 .. 100000 mm/min, got 1e-300"},
+      {"spindle: 1e300", "job.yaml:1: spindle: must be in 1 .. 200000 rpm, got 1e300"},
+      {"lead_in: 1e300", "job.yaml:1: lead_in: must be in 0 .. 100000 mm"},
+      {"retract: 1e-9", "job.yaml:1: retract: must be in 0.001 .. 100000 mm"},
+      {"tolerance: 1e-300", "job.yaml:1: tolerance: must be in 1e-05 .. 100 mm"},
+      {"clearance: 1e-9", "job.yaml:1: clearance: must be in 0.01 .. 1000 mm"},
+      {"sampling: {s: 6, t: 100000}", "job.yaml:1: sampling.t: expected a whole number in 8..2000"},
+      {"sampling: {s: 1000}", "job.yaml:1: sampling.s: expected a whole number in 4..200"},
+      {"sampling: {s: 200, t: 2000}", "job.yaml:1: sampling: s x t = 400000 samples, at most 60000"},
+      {"holder: {length: 1e9, diameter: 10}", "job.yaml:1: holder.length: must be in 0 .. 100000 mm"},
+      {"holder: {shank_length: 10, shank_diameter: -1}", "job.yaml:1: holder.shank_diameter: must be in 0 .. 100000 mm"},
+      {"post: {tolerance: 1e-300}", "job.yaml:1: post.tolerance: must be in 1e-05 .. 10 mm"},
+      {"post: {angle_tolerance: 90}", "job.yaml:1: post.angle_tolerance: must be in 0.0001 .. 10 deg"},
+      {"post: {safe_height: 1e300}", "job.yaml:1: post.safe_height: must be in 0 .. 100000 mm"},
+      {"post: {tool_length: 1e300}", "job.yaml:1: post.tool_length: must be in 0.001 .. 100000 mm"},
+      {"post: {setup: {rotate: [0, 0, 1e9]}}", "job.yaml:1: post.setup.rotate[2]: must be in -360 .. 360 deg"},
+      {"post: {setup: {translate: [1e300, 0, 0]}}", "job.yaml:1: post.setup.translate[0]: must be in -1000000 .. 1000000 mm"},
+      {"weights: {plane: 1e300}", "job.yaml:1: weights.plane: must be in 0 .. 1000000, got 1e300"},
+      {"weights: {plane: 0, point: 0}", "job.yaml:1: weights: plane or point must be > 0"},
+      {"fit: {robust: 1e300}", "job.yaml:1: fit.robust: must be in 0 .. 100000 mm"},
+  };
+  for (const auto& c : cases) {
+    CAPTURE(c.yaml);
+    const std::string message = error_of(dir, c.yaml);
+    CAPTURE(message);
+    CHECK(message.find(c.message) != std::string::npos);
+    CHECK(message.find('\n') == std::string::npos);
+  }
+  // The defaults and the paper's values stay accepted.
+  CHECK(error_of(dir, "sampling: {s: 30, t: 100}") == "(accepted)");
+  CHECK(error_of(dir, "feed: 600") == "(accepted)");
+}
+
+TEST_CASE("rail and meridian control points: errors name the job's key and line, not FitOptions fields") {
+  test::ScratchDir dir("job-control-points");
+  const struct {
+    const char* yaml;
+    const char* message;
+  } cases[] = {
+      {"fit: {rail_control_points: 40}", "job.yaml:1: fit.rail_control_points: 40 is more than half of sampling.t = 100"},
+      {"sampling: {t: 20}", "job.yaml:1: sampling.t: 20 is less than twice fit.rail_control_points = 16"},
+      {"tool: {control_points: 50}", "job.yaml:1: tool.control_points: 50 is more than sampling.s = 30"},
+      {"sampling: {s: 6}", "job.yaml:1: sampling.s: 6 is less than tool.control_points = 10"},
+  };
+  for (const auto& c : cases) {
+    CAPTURE(c.yaml);
+    const std::string message = error_of(dir, c.yaml);
+    CAPTURE(message);
+    CHECK(message.find(c.message) != std::string::npos);
+    CHECK(message.find("meridian_control_points") == std::string::npos);
+  }
+  CHECK(error_of(dir, "fit: {rail_control_points: 8}\nsampling: {t: 16}") == "(accepted)");
+}
