@@ -206,10 +206,9 @@ Job read_job(const std::filesystem::path& file) {
   if (job.fit.meridian_control_points > job.fit.samples_s)
     r.fail(sampling ? sampling : root, "sampling.s",
            fmt::format("{} is less than tool.control_points = {}", job.fit.samples_s, job.fit.meridian_control_points));
-  const YAML::Node rail = root["fit"] ? root["fit"]["rail_control_points"] : YAML::Node();
   if (2 * job.fit.rail_control_points > job.fit.samples_t) {
-    if (rail)
-      r.fail(rail, "fit.rail_control_points",
+    if (root["fit"] && root["fit"]["rail_control_points"])
+      r.fail(root["fit"]["rail_control_points"], "fit.rail_control_points",
              fmt::format("{} is more than half of sampling.t = {}", job.fit.rail_control_points, job.fit.samples_t));
     r.fail(sampling ? sampling : root, "sampling.t",
            fmt::format("{} is less than twice fit.rail_control_points = {} (default 16)", job.fit.samples_t,

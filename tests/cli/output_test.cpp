@@ -7,8 +7,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cstdint>
 #include <filesystem>
-#include <nlohmann/json.hpp>
 
 #include "core/blade.h"
 #include "tests/test_util.h"
@@ -152,20 +152,24 @@ TEST_CASE("a planted symlink in an existing --out is replaced, never written thr
   CHECK(entries(dir.file("out")) == 3);  // no temporary file or folder left
 }
 
-TEST_CASE("a write failure at the last file of a run leaves nothing: no folder, no programs, no temporary files") {
+TEST_CASE("a write failure late in a run leaves nothing: no folder, no programs, no temporary files") {
   test::ScratchDir dir("out-late-failure");
   const std::string job = blade_job(dir);
   REQUIRE(test::run_flankcam("run " + job + " --out " + dir.file("ok") + " --quiet", dir).code == 0);
-  // report.html is written last and is the largest file: a limit just below it fails only there.
-  const auto html = fs::file_size(dir.file("ok/report.html"));
+  // The NC programs are written first; a file size limit just below the largest file (a mesh or a
+  // report) fails there, after the programs were written.
+  std::string last;
+  std::uintmax_t html = 0;
   for (const auto& e : fs::directory_iterator(dir.file("ok")))
-    if (e.path().filename() != "report.html") REQUIRE(fs::file_size(e.path()) < html);
+    if (fs::file_size(e.path()) > html) html = fs::file_size(e.path()), last = e.path().filename().string();
+  INFO(last);
+  REQUIRE(fs::file_size(dir.file("ok/p1.ngc")) < html);
   const int before = entries(dir.path);
   const int code = run_with_file_limit({"run", job, "--out", dir.file("new/out"), "--quiet"}, html - 1, dir.file("err.txt"));
   const std::string err = test::read_text(dir.file("err.txt"));
   INFO(err);
   CHECK(code == 2);
-  CHECK(err.find("report.html") != std::string::npos);
+  CHECK(err.find(last + ": write failed (File too large)") != std::string::npos);
   CHECK(!fs::exists(dir.file("new")));            // not even the parent it created
   CHECK(entries(dir.path) == before + 1);         // only err.txt is new
 

@@ -69,7 +69,7 @@ TEST_CASE("rail and meridian control points: errors name the job's key and line,
     const char* yaml;
     const char* message;
   } cases[] = {
-      {"fit: {rail_control_points: 40}", "job.yaml:1: fit.rail_control_points: 40 is more than half of sampling.t = 100"},
+      {"fit: {rail_control_points: 60}", "job.yaml:1: fit.rail_control_points: 60 is more than half of sampling.t = 100"},
       {"sampling: {t: 20}", "job.yaml:1: sampling.t: 20 is less than twice fit.rail_control_points = 16"},
       {"tool: {control_points: 50}", "job.yaml:1: tool.control_points: 50 is more than sampling.s = 30"},
       {"sampling: {s: 6}", "job.yaml:1: sampling.s: 6 is less than tool.control_points = 10"},
