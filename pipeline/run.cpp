@@ -26,14 +26,13 @@ int FitRun::colliding() const {
 
 namespace {
 // The files `fit` writes per patch (outputs.h), also written by `run`.
-void plan_fit_files(const Job& job, const std::string& name, bool tool, bool apt, bool cl, OutputPlan& plan) {
+void plan_fit_files(const std::string& name, bool tool, bool apt, bool cl, OutputPlan& plan) {
   const std::string owner = "patch " + name;
   for (const char* suffix : {"-envelope.ply", "-deviation.ply", "-collisions.obj"}) plan.add(name + suffix, owner);
   if (tool)
     for (const char* suffix : {"-tool.csv", "-tool.dxf", "-tool.stl"}) plan.add(name + suffix, owner);
   if (apt) plan.add(name + ".apt", owner);
   if (cl) plan.add(name + "-cl.csv", owner);
-  (void)job;
 }
 
 void check_options(const RunOptions& o) {
@@ -71,7 +70,7 @@ FitRun fit_run(Job job, const RunOptions& o, ToolOf tool_of) {
 void check_fit_outputs(const Job& job) {
   OutputPlan plan;
   plan.add("report.json", "the report");
-  for (const PatchJob& p : job.patches) plan_fit_files(job, p.name, true, true, true, plan);
+  for (const PatchJob& p : job.patches) plan_fit_files(p.name, true, true, true, plan);
 }
 
 Machine check_run(const Job& job) {
@@ -84,7 +83,7 @@ Machine check_run(const Job& job) {
   plan.add("report.html", "the report");
   const std::vector<Dialect> dialects = dialects_of(machine, settings);
   for (const PatchJob& p : job.patches) {
-    plan_fit_files(job, p.name, job.post.tool, job.post.apt, job.post.cl, plan);
+    plan_fit_files(p.name, job.post.tool, job.post.apt, job.post.cl, plan);
     for (const char* suffix : {"-deviation.svg", "-tool.svg", "-angles.svg"}) plan.add(p.name + suffix, "patch " + p.name);
     for (const Dialect d : dialects) plan.add(p.name + file_extension(d), "the NC program of patch " + p.name);
   }
