@@ -81,6 +81,7 @@ std::vector<WrittenProgram> write_programs(const std::filesystem::path& out, con
   for (const Pending& p : pending) {
     write_nc((out / p.file).string(), p.posted.program, {p.dialect, settings.line_numbers, settings.options.path.tolerance_mm});
     written.push_back(summarize(p.posted, p.file, p.patch, p.dialect));
+    written.back().posted = p.posted;
   }
   return written;
 }

@@ -30,6 +30,7 @@ struct WrittenProgram {
   std::array<std::array<double, 2>, 2> rotary_range{};  // min, max degrees per rotary axis
   double minutes = 0;             // feed time of the cut moves
   std::array<std::vector<double>, 2> rotary_deg;  // programmed angles per move (for the chart)
+  Posted posted;                  // the program model (its motion for the 3D view)
 };
 
 // Posts `inputs` (one per patch, in order) and writes PATCH.EXT for each and, with more than one,
