@@ -1,8 +1,8 @@
 // The 3D view of a flankcam report (three.js r111 from Debian's libjs-three, inlined). The data is
 // the JSON of postproc/viewer.cpp: meshes as base64 little-endian Float32/Uint32 arrays, deviation
 // bands as bytes, the tool's meridians (z, r) from the tip, the posted programs' frames.
-// URL hash: #track=K&pose=N&colour=all|P&hide=envelope,ruled,path,part,tool&view=only (view=only: the
-// view alone, for screenshots).
+// URL hash: #track=K&pose=N&marker=M&colour=all|P&hide=envelope,ruled,path,part,tool&view=only
+// (marker: jump to the worst pose of collision M; view=only: the view alone, for screenshots).
 (function () {
   'use strict';
   var fail = window.flankcamViewerFail;
@@ -298,6 +298,7 @@
           document.getElementById('fcv-show-' + name).checked = false;
         });
       showFrame(q.pose !== undefined ? parseInt(q.pose, 10) || 0 : current.frame);
+      if (q.marker !== undefined && jumps[parseInt(q.marker, 10)]) jump(jumps[parseInt(q.marker, 10)]);
     };
     window.addEventListener('hashchange', fromHash);
 

@@ -7,6 +7,8 @@ slider moved through the URL hash #track=K&pose=N the page honours):
     log has no console message (the page's own hooks turn errors into data-flankcam-viewer="error: ...");
   * --screenshot: the canvas shows the deviation bands (green "within tolerance" pixels), and moving
     the slider moved the tool (the pictures differ inside the canvas).
+Then the same job at a tolerance of 1 um, where every patch gouges: the page is ready and #marker=M
+jumps to the worst pose of that gouge.
 Without a browser it exits 77 (CTest: skipped) unless FLANKCAM_REQUIRE_BROWSER=1, then it fails.
 --save PATH keeps the second screenshot (the README's picture: examples/conical-tool/report-view.png).
 """
@@ -140,6 +142,37 @@ def check_state(browser, page, fragment, png, failures):
     return label.group(1) if label else None, canvas
 
 
+def check_markers(browser, a, work):
+    """Gouges at 1 um: markers, and #marker=M shows the marker's pose."""
+    job = open(a.job, encoding="utf-8").read()
+    base = os.path.dirname(os.path.abspath(a.job))
+    job = re.sub(r"^surface: *(\S+)", lambda m: "surface: " + os.path.join(base, m.group(1)), job, flags=re.M)
+    job = re.sub(r"^tolerance: *[0-9.]+", "tolerance: 0.001", job, flags=re.M)
+    path = os.path.join(work, "gouge.yaml")
+    open(path, "w", encoding="utf-8").write(job)
+    out = os.path.join(work, "gouge")
+    p = subprocess.run([a.flankcam, "run", path, "--out", out, "--quiet"], capture_output=True, text=True)
+    if p.returncode != 4:
+        return [f"the 1 um job should gouge (exit 4), exited {p.returncode}: {p.stderr.strip()}"]
+    page = os.path.join(out, "report.html")
+    html = open(page, encoding="utf-8").read()
+    markers = re.findall(r'"pose":(\d+),"label":"[^"]*","frames":\[(-?\d+)', html)
+    if len(markers) < 2:
+        return [f"the 1 um job's view has {len(markers)} marker(s)"]
+    pose = int(markers[1][0])
+    dom, console = browser.dom("file://" + page + "#marker=1")
+    state = re.search(r'<body[^>]*data-flankcam-viewer="([^"]*)"', dom)
+    label = re.search(r'<span id="fcv-frame">([^<]*)</span>', dom)
+    print(f"#marker=1 (worst pose {pose}): data-flankcam-viewer={state.group(1) if state else None!r}, "
+          f"{label.group(1) if label else 'no pose label'}")
+    failures = [f"#marker=1: console: {line}" for line in console]
+    if not state or state.group(1) != "ready":
+        failures.append(f"#marker=1: data-flankcam-viewer is {state.group(1) if state else 'missing'!r}")
+    if not label or not label.group(1).startswith(f"pose {pose + 1} / "):
+        failures.append(f"#marker=1 shows {label.group(1) if label else None!r}, not pose {pose + 1}")
+    return failures
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flankcam", required=True)
@@ -188,13 +221,14 @@ def main():
     print(f"pixels changed by moving the slider: {changed}")
     if changed < 1000:
         failures.append(f"moving the slider changed only {changed} pixels of the canvas")
+    failures += check_markers(browser, a, work)
     if a.save:
         shutil.copyfile(moved_png, a.save)
         print(f"screenshot saved to {a.save}")
     for f in failures:
         print("FAIL:", f)
     if not failures:
-        print("OK: the 3D view is ready, error-free, shows the deviation bands and follows the slider")
+        print("OK: the 3D view is ready, error-free, shows the deviation bands, follows the slider and jumps to markers")
     return 1 if failures else 0
 
 
