@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <array>
 
 #include "core/atomic_file.h"
@@ -10,6 +11,7 @@
 #include "postproc/report_html.h"
 #include "postproc/report_svg.h"
 #include "postproc/tool_export.h"
+#include "postproc/viewer.h"
 
 namespace flankcam::pipeline {
 
@@ -88,6 +90,43 @@ std::vector<std::string> write_patch_files(OutputDir& out, const Job& job, const
 void write_program(OutputDir& out, const PostedProgram& p, const PostSettings& s) {
   write_nc(out.file(p.file), p.posted.program, {p.dialect, s.line_numbers, s.options.path.tolerance_mm});
 }
+// The 3D view of report.html: Φ with each patch's deviation, Ω, the fitted poses, collision markers,
+// and the motion of every posted program (the first dialect's) taken back to the part frame.
+ViewerScene viewer_scene(const Job& job, const FittedJob& fitted, const std::vector<PostedProgram>& programs,
+                         const Machine& machine) {
+  ViewerScene v;
+  v.tolerance_mm = job.tolerance_mm;
+  v.surface_mm = fitted.surface.mesh;
+  if (job.part != job.surface) v.part_mm = load_mesh(job.part.string()).mesh;
+  std::vector<std::string> names;
+  for (const FittedPatch& p : fitted.patches) {
+    ViewerPatch vp{p.job->name, p.profile_mm, p.assembly, p.fit.machined.design_deviation, p.fit.machined.omega.mesh, p.poses, {}};
+    for (double& d : vp.design_deviation_mm) d = fitted.frame.length_to_mm(d);
+    for (auto& x : vp.envelope_mm.vertices) x = fitted.frame.to_mm(x);
+    const std::vector<std::string> labels = collision_summary(p);
+    for (size_t i = 0; i < p.collisions.intervals.size(); ++i)
+      vp.markers.push_back({p.collisions.intervals[i].at, p.collisions.intervals[i].worst_pose, labels.at(i)});
+    names.push_back(vp.name);
+    v.patches.push_back(std::move(vp));
+  }
+  const ToolPose o = to_work(job.post, {Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ()});
+  const ToolPose x = to_work(job.post, {Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX()});
+  const ToolPose y = to_work(job.post, {Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitY()});
+  Eigen::Matrix3d R_work_part;
+  R_work_part << x.axis, y.axis, o.axis;
+  const Eigen::Matrix3d R = R_work_part.transpose();
+  const std::array<std::string, 2> rotary{machine.rotary[0].name, machine.rotary[1].name};
+  for (const PostedProgram& w : programs)
+    if (w.dialect == programs.front().dialect) v.tracks.push_back(viewer_track(w.posted, w.file, rotary, R, -R * o.tip, names));
+  for (size_t k = 0; k < fitted.patches.size(); ++k)  // patches without a program: their fitted poses
+    if (std::none_of(programs.begin(), programs.end(), [&](const PostedProgram& w) { return w.patch == names[k]; })) {
+      ViewerTrack t{names[k] + " (fitted poses, no program)", {"X", "Y", "Z", rotary[0], rotary[1]}, false, {}};
+      for (const ToolPose& q : fitted.patches[k].poses) t.frames.push_back({q, {}, false, int(k)});
+      v.tracks.push_back(std::move(t));
+    }
+  return v;
+}
+
 }  // namespace
 
 std::vector<std::vector<std::string>> write_fit(const FitRun& run, OutputDir& out) {
@@ -225,6 +264,7 @@ std::vector<std::vector<std::string>> write_run(const RunResult& run, OutputDir&
   for (const PostedProgram& w : programs)
     if (w.patch.empty()) html.intro.push_back("All patches in order, with tool changes: " + w.file);
   write_text(out, "report.json", report.dump(1) + "\n");
+  html.viewer = viewer_html(viewer_scene(job, fitted, programs, machine));
   write_text(out, "report.html", report_html(html));
   out.commit();
   return all_files;

@@ -30,7 +30,7 @@ struct PostSettings {
 struct PostedProgram {
   std::string file, patch;        // patch "" for the all-patches program
   Dialect dialect = Dialect::Iso;
-  Posted posted;
+  Posted posted;                  // the program model (its motion for the 3D view)
   int moves = 0, inserted = 0, slowed = 0, singular = 0, branch_changes = 0;
   std::array<std::array<double, 2>, 2> rotary_range{};  // min, max degrees per rotary axis
   double minutes = 0;             // feed time of the cut moves

@@ -30,7 +30,7 @@ std::string report_html(const HtmlReport& r) {
     for (const auto& c : row) h += "<td>" + markup_escape(c) + "</td>";
     h += "</tr>\n";
   }
-  h += "</table>\n";
+  h += "</table>\n" + r.viewer;
   for (const HtmlSection& s : r.sections) {
     h += "<section>\n<h2>" + markup_escape(s.heading) + "</h2>\n";
     for (const auto& w : s.warnings) h += "<div class=\"warn\">" + markup_escape(w) + "</div>\n";

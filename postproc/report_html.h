@@ -1,5 +1,6 @@
-// One self-contained HTML page for a job (no scripts, no external files): a summary table and a
-// section per patch with its pictures (inline SVG), facts and files.
+// One self-contained HTML page for a job (no external files): a summary table, the interactive 3D
+// view when given (postproc/viewer.h, its only scripts), and a section per patch with its pictures
+// (inline SVG), facts and files.
 #pragma once
 #include <string>
 #include <utility>
@@ -20,6 +21,7 @@ struct HtmlReport {
   std::vector<std::string> intro;                           // paragraphs
   std::vector<std::string> columns;                         // summary table
   std::vector<std::vector<std::string>> rows;
+  std::string viewer;                                       // viewer_html(...) or empty: no 3D view
   std::vector<HtmlSection> sections;
 };
 

@@ -133,7 +133,9 @@ TEST_CASE("flankcam run end to end: the program, back-simulated through the mach
   for (size_t at = html.find("<svg"); at != std::string::npos; at = html.find("<svg", at + 1)) ++svgs;
   CHECK(svgs == 3);
   CHECK(html.find("src=\"http") == std::string::npos);
-  CHECK(html.find("<script") == std::string::npos);
+  // Scripts only in the 3D view (three.js and the page's own, inlined), none loaded from elsewhere.
+  CHECK(html.find("<script") > html.find("<section id=\"flankcam-view\">"));
+  CHECK(html.find(" src=") == std::string::npos);
   for (const char* f : {"p1-deviation.svg", "p1-tool.svg", "p1-angles.svg", "p1-tool.dxf", "p1-tool.stl", "p1.apt"})
     CHECK(std::filesystem::exists(dir.file(std::string("out/") + f)));
 }

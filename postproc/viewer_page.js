@@ -1,0 +1,316 @@
+// The 3D view of a flankcam report (three.js r111 from Debian's libjs-three, inlined). The data is
+// the JSON of postproc/viewer.cpp: meshes as base64 little-endian Float32/Uint32 arrays, deviation
+// bands as bytes, the tool's meridians (z, r) from the tip, the posted programs' frames.
+// URL hash: #track=K&pose=N&marker=M&colour=all|P&hide=envelope,ruled,path,part,tool&view=only
+// (marker: jump to the worst pose of collision M; view=only: the view alone, for screenshots).
+(function () {
+  'use strict';
+  var fail = window.flankcamViewerFail;
+  try {
+    var data = JSON.parse(document.getElementById('fcv-data').textContent);
+    var bytes = function (b64) {
+      var s = atob(b64), u = new Uint8Array(s.length);
+      for (var i = 0; i < s.length; ++i) u[i] = s.charCodeAt(i);
+      return u;
+    };
+    var f32 = function (b64) { return new Float32Array(bytes(b64).buffer); };
+    var u32 = function (b64) { return new Uint32Array(bytes(b64).buffer); };
+    var params = {};
+    location.hash.replace(/^#/, '').split('&').forEach(function (kv) {
+      var p = kv.split('=');
+      if (p[0]) params[decodeURIComponent(p[0])] = decodeURIComponent(p[1] || '');
+    });
+    if (params.view === 'only') document.body.classList.add('fcv-only');
+
+    var canvas = document.getElementById('fcv-canvas');
+    var renderer = new THREE.WebGLRenderer({ canvas: canvas, antialias: true, preserveDrawingBuffer: true });
+    renderer.setPixelRatio(window.devicePixelRatio || 1);
+    renderer.setClearColor(0xf4f6f9, 1);
+    var scene = new THREE.Scene();
+    var camera = new THREE.PerspectiveCamera(35, 1, 0.1, 1000);
+    camera.up.set(0, 0, 1);  // machine convention: Z up
+    scene.add(new THREE.AmbientLight(0xffffff, 0.55));
+    var light = new THREE.DirectionalLight(0xffffff, 0.55);
+    light.position.set(0.3, 0.5, 1);
+    camera.add(light);
+    scene.add(camera);
+
+    var meshGeometry = function (m) {
+      var g = new THREE.BufferGeometry();
+      g.setAttribute('position', new THREE.BufferAttribute(f32(m.positions), 3));
+      g.setIndex(new THREE.BufferAttribute(u32(m.indices), 1));
+      g.computeVertexNormals();
+      g.computeBoundingSphere();
+      return g;
+    };
+    var vertexColors = THREE.VertexColors !== undefined ? THREE.VertexColors : true;
+    var translucent = function (color, opacity) {
+      return new THREE.MeshLambertMaterial({ color: color, transparent: true, opacity: opacity, side: THREE.DoubleSide,
+                                             depthWrite: false });
+    };
+
+    // Φ coloured by its deviation band (viewer.h DeviationBand: none, within, over, under).
+    var bandColour = [[0.667, 0.667, 0.667], [0.235, 0.667, 0.314], [0.157, 0.314, 0.843], [0.843, 0.157, 0.157]];
+    var surfaceGeometry = meshGeometry(data.surface);
+    var nv = data.surface.vertices;
+    var colours = new Float32Array(3 * nv);
+    surfaceGeometry.setAttribute('color', new THREE.BufferAttribute(colours, 3));
+    var paint = function (b64) {
+      var b = bytes(b64);
+      for (var i = 0; i < nv; ++i) {
+        var c = bandColour[b[i]] || bandColour[0];
+        colours[3 * i] = c[0]; colours[3 * i + 1] = c[1]; colours[3 * i + 2] = c[2];
+      }
+      surfaceGeometry.attributes.color.needsUpdate = true;
+    };
+    var surface = new THREE.Mesh(surfaceGeometry, new THREE.MeshLambertMaterial({ vertexColors: vertexColors,
+                                                                                 side: THREE.DoubleSide }));
+    scene.add(surface);
+    var centre = surfaceGeometry.boundingSphere.center.clone(), radius = surfaceGeometry.boundingSphere.radius;
+
+    var partLayer = new THREE.Group(), envelopeLayer = new THREE.Group(), ruledLayer = new THREE.Group();
+    var pathLayer = new THREE.Group(), toolLayer = new THREE.Group(), markerLayer = new THREE.Group();
+    [partLayer, envelopeLayer, ruledLayer, pathLayer, toolLayer, markerLayer].forEach(function (l) { scene.add(l); });
+    if (data.part) partLayer.add(new THREE.Mesh(meshGeometry(data.part), translucent(0x8899aa, 0.22)));
+
+    // Per patch: envelope Ω, the axis ruled surface, the tool assembly revolved from its meridians.
+    var tools = [];
+    var sideSum = new THREE.Vector3();
+    data.patches.forEach(function (p) {
+      if (p.envelope) {
+        // Pushed back in depth: where Ω and Φ coincide Φ's bands show, Ω shows where it leaves Φ.
+        var em = translucent(0xd8b840, 0.3);
+        em.polygonOffset = true;
+        em.polygonOffsetFactor = 2;
+        em.polygonOffsetUnits = 4;
+        var e = new THREE.Mesh(meshGeometry(p.envelope), em);
+        e.renderOrder = 1;
+        envelopeLayer.add(e);
+      }
+      var r = f32(p.rails), n = p.poses;
+      if (n >= 2) {
+        var g = new THREE.BufferGeometry(), idx = [];
+        g.setAttribute('position', new THREE.BufferAttribute(r, 3));
+        for (var i = 0; i + 1 < n; ++i) idx.push(2 * i, 2 * i + 2, 2 * i + 3, 2 * i, 2 * i + 3, 2 * i + 1);
+        g.setIndex(idx);
+        g.computeVertexNormals();
+        // Faint: it lies between the tool side and Φ. Rails and a few rulings carry its shape.
+        var ruled = new THREE.Mesh(g, translucent(0x9a5cd0, 0.12));
+        ruled.renderOrder = 2;
+        ruledLayer.add(ruled);
+        var rails = [new THREE.BufferGeometry(), new THREE.BufferGeometry()];
+        for (var k = 0; k < 2; ++k) {
+          var pts = new Float32Array(3 * n);
+          for (var j = 0; j < n; ++j) for (var c = 0; c < 3; ++c) pts[3 * j + c] = r[6 * j + 3 * k + c];
+          rails[k].setAttribute('position', new THREE.BufferAttribute(pts, 3));
+          ruledLayer.add(new THREE.Line(rails[k], new THREE.LineBasicMaterial({ color: 0x6a2ca0 })));
+        }
+        var every = Math.max(1, Math.round(n / 6)), rulings = [];
+        for (var q = 0; q < n; q += every) for (var c2 = 0; c2 < 6; ++c2) rulings.push(r[6 * q + c2]);
+        var rg = new THREE.BufferGeometry();
+        rg.setAttribute('position', new THREE.BufferAttribute(new Float32Array(rulings), 3));
+        ruledLayer.add(new THREE.LineSegments(rg, new THREE.LineBasicMaterial({ color: 0x6a2ca0 })));
+        for (var m = 0; m < n; ++m)
+          sideSum.add(new THREE.Vector3(0.5 * (r[6 * m] + r[6 * m + 3]), 0.5 * (r[6 * m + 1] + r[6 * m + 4]),
+                                        0.5 * (r[6 * m + 2] + r[6 * m + 5])).sub(centre));
+      }
+      var tool = new THREE.Group();
+      var lathe = function (zr, color) {
+        if (zr.length < 2) return;
+        var pts = [new THREE.Vector2(0, zr[0][0])];
+        zr.forEach(function (q) { pts.push(new THREE.Vector2(Math.max(q[1], 1e-6), q[0])); });
+        pts.push(new THREE.Vector2(0, zr[zr.length - 1][0]));
+        tool.add(new THREE.Mesh(new THREE.LatheBufferGeometry(pts, 48),
+                                new THREE.MeshLambertMaterial({ color: color, side: THREE.DoubleSide })));
+      };
+      lathe(p.cutter, 0xe09a30);
+      lathe(p.shank, 0x9aa0a8);
+      lathe(p.holder, 0x4a5a6e);
+      tool.visible = false;
+      toolLayer.add(tool);
+      tools.push(tool);
+    });
+
+    // Markers: collisions and gouges, each jumps to its worst pose.
+    var markerSize = 0.012 * radius;
+    var markerList = document.getElementById('fcv-markers');
+    var jumps = [];
+    data.patches.forEach(function (p) {
+      p.markers.forEach(function (mk) {
+        var s = new THREE.Mesh(new THREE.SphereBufferGeometry(markerSize, 16, 12),
+                               new THREE.MeshBasicMaterial({ color: 0xff2060 }));
+        s.position.set(mk.at[0], mk.at[1], mk.at[2]);
+        markerLayer.add(s);
+        var b = document.createElement('button');
+        b.type = 'button';
+        b.textContent = mk.label;
+        b.addEventListener('click', function () { jump(mk); });
+        markerList.appendChild(b);
+        jumps.push(mk);
+      });
+    });
+
+    // Tracks: the posted programs (and fitted poses of patches without one).
+    var tracks = data.tracks.map(function (t) {
+      return { name: t.name, axes: t.axes, hasValues: t.has_values, n: t.frames, tip: f32(t.tip), axis: f32(t.axis),
+               values: f32(t.values), rapid: bytes(t.rapid), patch: u32(t.patch) };
+    });
+    var trackSelect = document.getElementById('fcv-track'), colourSelect = document.getElementById('fcv-colour');
+    var slider = document.getElementById('fcv-slider'), frameLabel = document.getElementById('fcv-frame');
+    var readout = document.getElementById('fcv-readout'), playButton = document.getElementById('fcv-play');
+    tracks.forEach(function (t, i) {
+      var o = document.createElement('option');
+      o.value = i;
+      o.textContent = t.name + ' (' + t.n + ' poses)';
+      trackSelect.appendChild(o);
+    });
+    var addColour = function (value, label) {
+      var o = document.createElement('option');
+      o.value = value;
+      o.textContent = label;
+      colourSelect.appendChild(o);
+    };
+    addColour('all', 'all patches');
+    data.patches.forEach(function (p, i) { addColour(String(i), p.name); });
+    var setColour = function (v) {
+      var i = parseInt(v, 10);
+      paint(v !== 'all' && i >= 0 && i < data.patches.length ? data.patches[i].bands : data.bands);
+      colourSelect.value = v !== 'all' && i >= 0 && i < data.patches.length ? String(i) : 'all';
+    };
+
+    var current = { track: 0, frame: 0 };
+    var pathLine = null;
+    var fmt3 = function (x) { return x.toFixed(3); };
+    var yAxis = new THREE.Vector3(0, 1, 0);
+    var render = function () { renderer.render(scene, camera); };
+    var showFrame = function (i) {
+      var t = tracks[current.track];
+      if (!t || t.n === 0) { readout.textContent = 'no poses'; return; }
+      i = Math.max(0, Math.min(t.n - 1, i | 0));
+      current.frame = i;
+      slider.value = i;
+      var patch = t.patch[i];
+      tools.forEach(function (g, k) { g.visible = k === patch; });
+      var tool = tools[patch];
+      if (tool) {
+        tool.position.set(t.tip[3 * i], t.tip[3 * i + 1], t.tip[3 * i + 2]);
+        tool.quaternion.setFromUnitVectors(yAxis, new THREE.Vector3(t.axis[3 * i], t.axis[3 * i + 1], t.axis[3 * i + 2]).normalize());
+      }
+      frameLabel.textContent = 'pose ' + (i + 1) + ' / ' + t.n;
+      var words = [];
+      if (t.hasValues) for (var a = 0; a < 5; ++a) words.push(t.axes[a] + ' ' + fmt3(t.values[5 * i + a]));
+      readout.textContent = (data.patches[patch] ? data.patches[patch].name : '') + ' \u00b7 ' +
+                            (t.rapid[i] ? 'rapid' : 'feed') + ' \u00b7 ' +
+                            (t.hasValues ? 'programmed ' + words.join('  ') : 'fitted pose, no program (it collides)') +
+                            ' \u00b7 tip ' + fmt3(t.tip[3 * i]) + ', ' + fmt3(t.tip[3 * i + 1]) + ', ' + fmt3(t.tip[3 * i + 2]) + ' mm';
+      render();
+    };
+    var setTrack = function (k) {
+      k = Math.max(0, Math.min(tracks.length - 1, k | 0));
+      current.track = k;
+      trackSelect.value = k;
+      var t = tracks[k];
+      if (pathLine) { pathLayer.remove(pathLine); pathLine.geometry.dispose(); }
+      if (!t) return;
+      slider.max = Math.max(0, t.n - 1);
+      var g = new THREE.BufferGeometry(), col = new Float32Array(3 * t.n);
+      for (var i = 0; i < t.n; ++i) {
+        var c = t.rapid[i] ? [1, 0.55, 0.1] : [0.12, 0.16, 0.25];
+        col[3 * i] = c[0]; col[3 * i + 1] = c[1]; col[3 * i + 2] = c[2];
+      }
+      g.setAttribute('position', new THREE.BufferAttribute(t.tip, 3));
+      g.setAttribute('color', new THREE.BufferAttribute(col, 3));
+      pathLine = new THREE.Line(g, new THREE.LineBasicMaterial({ vertexColors: vertexColors }));
+      pathLayer.add(pathLine);
+    };
+    var jump = function (mk) {
+      var k = mk.frames[current.track] >= 0 ? current.track : mk.frames.findIndex(function (f) { return f >= 0; });
+      if (k < 0) return;
+      if (k !== current.track) setTrack(k);
+      showFrame(mk.frames[k]);
+    };
+
+    // Camera: on the tool's side of Φ, a little above, the whole surface in view.
+    var normal = new THREE.Vector3(), pos = surfaceGeometry.attributes.position.array, ix = surfaceGeometry.index.array;
+    var va = new THREE.Vector3(), vb = new THREE.Vector3(), vc = new THREE.Vector3();
+    for (var f = 0; f < ix.length; f += 3) {
+      va.fromArray(pos, 3 * ix[f]); vb.fromArray(pos, 3 * ix[f + 1]); vc.fromArray(pos, 3 * ix[f + 2]);
+      normal.add(vb.sub(va).cross(vc.sub(va)));
+    }
+    if (normal.lengthSq() === 0) normal.set(1, 0, 0);
+    normal.normalize();
+    if (sideSum.dot(normal) < 0) normal.negate();
+    // Turned 20 degrees about Z so the tool does not hide the surface it cuts.
+    var view = normal.clone().applyAxisAngle(new THREE.Vector3(0, 0, 1), 0.35).add(new THREE.Vector3(0, 0, 0.35)).normalize();
+    var far = radius * 3.8;
+    camera.position.copy(centre).addScaledVector(view, far);
+    camera.near = radius * 0.01;
+    camera.far = radius * 20;
+    var controls = new THREE.OrbitControls(camera, canvas);
+    controls.target.copy(centre);
+    controls.screenSpacePanning = true;
+    controls.addEventListener('change', render);
+    controls.update();
+
+    var resize = function () {
+      var w = canvas.clientWidth || 800, h = canvas.clientHeight || 600;
+      renderer.setSize(w, h, false);
+      camera.aspect = w / h;
+      camera.updateProjectionMatrix();
+      render();
+    };
+    window.addEventListener('resize', resize);
+
+    var playing = null;
+    var stop = function () { if (playing) clearInterval(playing); playing = null; playButton.textContent = 'Play'; };
+    playButton.addEventListener('click', function () {
+      if (playing) { stop(); return; }
+      var t = tracks[current.track];
+      if (!t) return;
+      if (current.frame >= t.n - 1) showFrame(0);
+      var step = Math.max(1, Math.round(t.n / 600));  // a whole program in about 20 s
+      playButton.textContent = 'Pause';
+      playing = setInterval(function () {
+        if (current.frame >= t.n - 1) { stop(); return; }
+        showFrame(current.frame + step);
+      }, 33);
+    });
+    slider.addEventListener('input', function () { stop(); showFrame(parseInt(slider.value, 10)); });
+    trackSelect.addEventListener('change', function () { stop(); setTrack(parseInt(trackSelect.value, 10)); showFrame(0); });
+    colourSelect.addEventListener('change', function () { setColour(colourSelect.value); render(); });
+    var layers = { envelope: envelopeLayer, ruled: ruledLayer, path: pathLayer, part: partLayer, tool: toolLayer };
+    Object.keys(layers).forEach(function (name) {
+      var box = document.getElementById('fcv-show-' + name);
+      box.addEventListener('change', function () { layers[name].visible = box.checked; render(); });
+    });
+    var fromHash = function () {
+      var q = {};
+      location.hash.replace(/^#/, '').split('&').forEach(function (kv) {
+        var p = kv.split('=');
+        if (p[0]) q[decodeURIComponent(p[0])] = decodeURIComponent(p[1] || '');
+      });
+      if (q.track !== undefined) setTrack(parseInt(q.track, 10) || 0);
+      if (q.colour !== undefined) setColour(q.colour);
+      if (q.hide !== undefined)
+        q.hide.split(',').forEach(function (name) {
+          if (!layers[name]) return;
+          layers[name].visible = false;
+          document.getElementById('fcv-show-' + name).checked = false;
+        });
+      showFrame(q.pose !== undefined ? parseInt(q.pose, 10) || 0 : current.frame);
+      if (q.marker !== undefined && jumps[parseInt(q.marker, 10)]) jump(jumps[parseInt(q.marker, 10)]);
+    };
+    window.addEventListener('hashchange', fromHash);
+
+    setColour('all');
+    setTrack(0);
+    resize();
+    fromHash();
+    requestAnimationFrame(function () {
+      if (!/^error/.test(document.body.getAttribute('data-flankcam-viewer') || ''))
+        document.body.setAttribute('data-flankcam-viewer', 'ready');
+    });
+  } catch (e) {
+    fail(e && e.message ? e.message : String(e));
+  }
+})();

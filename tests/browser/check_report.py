@@ -1,0 +1,236 @@
+#!/usr/bin/env python3
+"""Acceptance test of report.html's 3D view (issue 18) in headless Chromium, standard library only.
+
+Runs `flankcam run JOB --out WORK/run`, then for two states of the view (the first pose, and the
+slider moved through the URL hash #track=K&pose=N the page honours):
+  * --dump-dom: <body data-flankcam-viewer="ready">, the readout names the pose, and Chromium's
+    log has no console message (the page's own hooks turn errors into data-flankcam-viewer="error: ...");
+  * --screenshot: the canvas shows the deviation bands (green "within tolerance" pixels), and moving
+    the slider moved the tool (the pictures differ inside the canvas).
+Then the same job at a tolerance of 1 um, where every patch gouges: the page is ready and #marker=M
+jumps to the worst pose of that gouge.
+Without a browser it exits 77 (CTest: skipped) unless FLANKCAM_REQUIRE_BROWSER=1, then it fails.
+--save PATH keeps the second screenshot (the README's picture: examples/conical-tool/report-view.png).
+"""
+import argparse
+import os
+import re
+import shutil
+import struct
+import subprocess
+import sys
+import tempfile
+import zlib
+
+WINDOW = (1280, 760)
+CANVAS_HEIGHT = 640  # #fcv-canvas in view=only mode starts at the top
+
+
+def find_browser():
+    for name in [os.environ.get("FLANKCAM_CHROMIUM", ""), "chromium", "chromium-browser", "google-chrome"]:
+        if name and shutil.which(name):
+            return shutil.which(name)
+    return None
+
+
+def read_png(path):
+    """(width, height, rows of RGB tuples) of an 8-bit, non-interlaced RGB or RGBA PNG."""
+    data = open(path, "rb").read()
+    if data[:8] != b"\x89PNG\r\n\x1a\n":
+        raise ValueError(f"{path}: not a PNG")
+    pos, idat, width = 8, b"", 0
+    while pos < len(data):
+        length, kind = struct.unpack(">I4s", data[pos:pos + 8])
+        body = data[pos + 8:pos + 8 + length]
+        if kind == b"IHDR":
+            width, height, depth, colour, _, _, interlace = struct.unpack(">IIBBBBB", body)
+            if depth != 8 or colour not in (2, 6) or interlace:
+                raise ValueError(f"{path}: unsupported PNG (depth {depth}, colour type {colour}, interlace {interlace})")
+            bpp = 3 if colour == 2 else 4
+        elif kind == b"IDAT":
+            idat += body
+        pos += 12 + length
+    raw = zlib.decompress(idat)
+    stride = width * bpp
+    rows, prev = [], bytearray(stride)
+    for y in range(height):
+        f = raw[y * (stride + 1)]
+        line = bytearray(raw[y * (stride + 1) + 1:(y + 1) * (stride + 1)])
+        for i in range(stride):
+            a = line[i - bpp] if i >= bpp else 0
+            b = prev[i]
+            c = prev[i - bpp] if i >= bpp else 0
+            if f == 1:
+                line[i] = (line[i] + a) & 255
+            elif f == 2:
+                line[i] = (line[i] + b) & 255
+            elif f == 3:
+                line[i] = (line[i] + (a + b) // 2) & 255
+            elif f == 4:
+                p = a + b - c
+                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+                line[i] = (line[i] + (a if pa <= pb and pa <= pc else b if pb <= pc else c)) & 255
+        rows.append([tuple(line[x * bpp:x * bpp + 3]) for x in range(width)])
+        prev = line
+    return width, height, rows
+
+
+def band(rgb):
+    """The deviation band a lit pixel shows: within (green), under (red), over (blue), or None."""
+    r, g, b = rgb
+    if g > 60 and g > 1.5 * r and g > 1.3 * b:
+        return "within"
+    if r > 80 and r > 2.5 * g and r > 2.5 * b:
+        return "under"
+    if b > 80 and b > 2.2 * r and b > 1.6 * g:
+        return "over"
+    return None
+
+
+class Browser:
+    def __init__(self, exe, work):
+        self.exe, self.work = exe, work
+
+    def run(self, url, *flags):
+        profile = tempfile.mkdtemp(prefix="profile-", dir=self.work)
+        cmd = [self.exe, "--headless", "--no-sandbox", "--disable-gpu", "--use-angle=swiftshader",
+               "--enable-unsafe-swiftshader", "--hide-scrollbars", "--no-first-run", "--disable-extensions",
+               f"--user-data-dir={profile}", f"--window-size={WINDOW[0]},{WINDOW[1]}", "--virtual-time-budget=15000",
+               "--enable-logging=stderr", "--v=0", *flags, url]
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=240)
+        shutil.rmtree(profile, ignore_errors=True)
+        return p
+
+    def dom(self, url):
+        p = self.run(url, "--dump-dom")
+        # Chromium logs every console message of the page as INFO:CONSOLE; SwiftShader's performance
+        # notes about ReadPixels (the screenshot) are the driver's, not the page's.
+        console = [l for l in p.stderr.splitlines() if ":CONSOLE" in l and "GL Driver Message (OpenGL, Performance" not in l]
+        return p.stdout, console
+
+    def screenshot(self, url, path):
+        self.run(url, f"--screenshot={path}")
+        if not os.path.exists(path):
+            raise RuntimeError(f"chromium wrote no screenshot for {url}")
+        return read_png(path)
+
+
+def check_state(browser, page, fragment, png, failures):
+    url = "file://" + page + fragment
+    dom, console = browser.dom(url)
+    state = re.search(r'<body[^>]*data-flankcam-viewer="([^"]*)"', dom)
+    label = re.search(r'<span id="fcv-frame">([^<]*)</span>', dom)
+    print(f"{fragment}: data-flankcam-viewer={state.group(1) if state else None!r}, "
+          f"{label.group(1) if label else 'no pose label'}, {len(console)} console message(s)")
+    if not state or state.group(1) != "ready":
+        failures.append(f"{fragment}: data-flankcam-viewer is {state.group(1) if state else 'missing'!r}, not 'ready'")
+    for line in console:
+        failures.append(f"{fragment}: console: {line}")
+    width, height, rows = browser.screenshot(url, png)
+    counts = {"within": 0, "under": 0, "over": 0}
+    canvas = rows[:min(height, CANVAS_HEIGHT)]
+    for row in canvas:
+        for px in row:
+            k = band(px)
+            if k:
+                counts[k] += 1
+    share = counts["within"] / (width * len(canvas))
+    print(f"{fragment}: canvas {width}x{len(canvas)}: within {counts['within']}, under {counts['under']}, "
+          f"over {counts['over']} pixels ({100 * share:.1f}% green)")
+    if share < 0.01:
+        failures.append(f"{fragment}: the canvas shows no deviation bands ({counts['within']} green pixels)")
+    return label.group(1) if label else None, canvas
+
+
+def check_markers(browser, a, work):
+    """Gouges at 1 um: markers, and #marker=M shows the marker's pose."""
+    job = open(a.job, encoding="utf-8").read()
+    base = os.path.dirname(os.path.abspath(a.job))
+    job = re.sub(r"^surface: *(\S+)", lambda m: "surface: " + os.path.join(base, m.group(1)), job, flags=re.M)
+    job = re.sub(r"^tolerance: *[0-9.]+", "tolerance: 0.001", job, flags=re.M)
+    path = os.path.join(work, "gouge.yaml")
+    open(path, "w", encoding="utf-8").write(job)
+    out = os.path.join(work, "gouge")
+    p = subprocess.run([a.flankcam, "run", path, "--out", out, "--quiet"], capture_output=True, text=True)
+    if p.returncode != 4:
+        return [f"the 1 um job should gouge (exit 4), exited {p.returncode}: {p.stderr.strip()}"]
+    page = os.path.join(out, "report.html")
+    html = open(page, encoding="utf-8").read()
+    markers = re.findall(r'"pose":(\d+),"label":"[^"]*","frames":\[(-?\d+)', html)
+    if len(markers) < 2:
+        return [f"the 1 um job's view has {len(markers)} marker(s)"]
+    pose = int(markers[1][0])
+    dom, console = browser.dom("file://" + page + "#marker=1")
+    state = re.search(r'<body[^>]*data-flankcam-viewer="([^"]*)"', dom)
+    label = re.search(r'<span id="fcv-frame">([^<]*)</span>', dom)
+    print(f"#marker=1 (worst pose {pose}): data-flankcam-viewer={state.group(1) if state else None!r}, "
+          f"{label.group(1) if label else 'no pose label'}")
+    failures = [f"#marker=1: console: {line}" for line in console]
+    if not state or state.group(1) != "ready":
+        failures.append(f"#marker=1: data-flankcam-viewer is {state.group(1) if state else 'missing'!r}")
+    if not label or not label.group(1).startswith(f"pose {pose + 1} / "):
+        failures.append(f"#marker=1 shows {label.group(1) if label else None!r}, not pose {pose + 1}")
+    return failures
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--flankcam", required=True)
+    ap.add_argument("--job", required=True)
+    ap.add_argument("--work", required=True, help="scratch directory (emptied)")
+    ap.add_argument("--save", help="copy the moved-slider screenshot here")
+    a = ap.parse_args()
+
+    exe = find_browser()
+    if not exe:
+        if os.environ.get("FLANKCAM_REQUIRE_BROWSER") == "1":
+            print("FAIL: no chromium (apt-get install chromium; .ci/install-deps does) and FLANKCAM_REQUIRE_BROWSER=1")
+            return 1
+        print("SKIP: no chromium on PATH (set FLANKCAM_REQUIRE_BROWSER=1 to make this a failure)")
+        return 77
+    shutil.rmtree(a.work, ignore_errors=True)
+    os.makedirs(a.work)
+    work = os.path.abspath(a.work)
+    out = os.path.join(work, "run")
+    p = subprocess.run([a.flankcam, "run", a.job, "--out", out, "--quiet"], capture_output=True, text=True)
+    if p.returncode != 0:
+        print(p.stdout, p.stderr)
+        print(f"FAIL: flankcam run exited {p.returncode}")
+        return 1
+    page = os.path.join(out, "report.html")
+    html = open(page, encoding="utf-8").read()
+    if re.search(r'<script[^>]+src=|<link[^>]+href="?https?:|https?://[^"\s]*\.js', html):
+        print("FAIL: report.html loads something from outside the page")
+        return 1
+    tracks = re.search(r'"tracks":\[(.*)\]\}\s*</script>', html, re.S)
+    frames = [int(n) for n in re.findall(r'"frames":(\d+),"original_frames"', tracks.group(1))] if tracks else []
+    if not frames:
+        print("FAIL: the view has no posed program")
+        return 1
+    # The last track (the whole program when there are several patches), slider half way.
+    track, pose = len(frames) - 1, frames[-1] // 2
+    browser = Browser(exe, work)
+    failures = []
+    first_label, first = check_state(browser, page, "#view=only", os.path.join(work, "first.png"), failures)
+    moved_png = os.path.join(work, "moved.png")
+    moved_label, moved = check_state(browser, page, f"#view=only&track={track}&pose={pose}", moved_png, failures)
+    expected = f"pose {pose + 1} / {frames[track]}"
+    if moved_label != expected:
+        failures.append(f"after moving the slider the view says {moved_label!r}, not {expected!r}")
+    changed = sum(1 for r0, r1 in zip(first, moved) for p0, p1 in zip(r0, r1) if p0 != p1)
+    print(f"pixels changed by moving the slider: {changed}")
+    if changed < 1000:
+        failures.append(f"moving the slider changed only {changed} pixels of the canvas")
+    failures += check_markers(browser, a, work)
+    if a.save:
+        shutil.copyfile(moved_png, a.save)
+        print(f"screenshot saved to {a.save}")
+    for f in failures:
+        print("FAIL:", f)
+    if not failures:
+        print("OK: the 3D view is ready, error-free, shows the deviation bands, follows the slider and jumps to markers")
+    return 1 if failures else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
