@@ -8,6 +8,7 @@
 #include <BRepGProp.hxx>
 #include <BRepMesh_IncrementalMesh.hxx>
 #include <BRepTools.hxx>
+#include <BRep_Builder.hxx>
 #include <BRep_Tool.hxx>
 #include <Bnd_Box.hxx>
 #include <GProp_GProps.hxx>
@@ -28,6 +29,7 @@
 #include <TopTools_ListOfShape.hxx>
 #include <TopTools_MapOfShape.hxx>
 #include <TopoDS.hxx>
+#include <TopoDS_Compound.hxx>
 #include <TopoDS_Face.hxx>
 #include <fmt/format.h>
 
@@ -212,6 +214,8 @@ std::string CadOptions::validate() const {
   if (!(chordal_deflection_mm > 0) || !std::isfinite(chordal_deflection_mm)) return "chordal_deflection: must be > 0 mm";
   if (!(angular_deflection_rad > 0 && angular_deflection_rad < M_PI)) return "angular_deflection: must be in (0, pi) rad";
   if (!(sewing_tolerance_mm > 0) || !std::isfinite(sewing_tolerance_mm)) return "sewing_tolerance: must be > 0 mm";
+  if (!fine_faces.empty() && !(fine_deflection_mm > 0 && fine_deflection_mm <= chordal_deflection_mm))
+    return "fine_deflection: must be > 0 mm and at most chordal_deflection";
   return {};
 }
 
@@ -237,6 +241,10 @@ CadMesh load_cad(const std::string& path, const CadOptions& options) {
     chosen.push_back(model.faces[size_t(k - 1)]);
   }
 
+  for (int k : options.fine_faces)
+    if (k < 1 || k > n)
+      throw InputError(fmt::format("{}: face {} out of range (the model has {} faces, numbered from 1)", path, k, n));
+
   CadMesh out;
   out.faces_in_file = n;
   out.units = model.units;
@@ -252,6 +260,19 @@ CadMesh load_cad(const std::string& path, const CadOptions& options) {
     p.Angle = options.angular_deflection_rad;
     p.Relative = Standard_False;
     p.InParallel = Standard_False;  // same triangles at any thread count
+    if (!options.fine_faces.empty()) {
+      // The fine faces first: BRepMesh keeps a triangulation finer than it is asked for, and the
+      // coarse faces around them take over the nodes of their shared edges.
+      TopoDS_Compound fine;
+      BRep_Builder builder;
+      builder.MakeCompound(fine);
+      const std::set<int> wanted(options.fine_faces.begin(), options.fine_faces.end());
+      for (const auto& [face, input] : sewn.faces)
+        if (wanted.count(numbers[size_t(input)])) builder.Add(fine, face);
+      IMeshTools_Parameters pf = p;
+      pf.Deflection = options.fine_deflection_mm;
+      BRepMesh_IncrementalMesh fine_mesher(fine, pf);
+    }
     BRepMesh_IncrementalMesh mesher(sewn.shape, p);
     std::vector<char> got(chosen.size(), 0);
     for (const auto& [face, input] : sewn.faces) {
@@ -368,6 +389,21 @@ CadFaces list_faces(const std::string& path, double sewing_tolerance_mm) {
     throw InputError(fmt::format("{}: cannot analyse the faces ({})", path, occt_message(e)));
   }
   return out;
+}
+
+CadMesh load_part_file(const std::string& part, const std::string& surface, const std::vector<int>& surface_faces,
+                       double part_deflection_mm, double surface_deflection_mm) {
+  if (!is_cad_file(part)) return load_surface_file(part, {}, part_deflection_mm);
+  CadOptions o;
+  o.chordal_deflection_mm = std::max(part_deflection_mm, surface_deflection_mm);
+  std::error_code ec;
+  if (std::filesystem::equivalent(part, surface, ec)) {
+    o.fine_faces = surface_faces;
+    if (o.fine_faces.empty())
+      for (int k = 1; k <= int(list_faces(part).faces.size()); ++k) o.fine_faces.push_back(k);
+    o.fine_deflection_mm = surface_deflection_mm;
+  }
+  return load_cad(part, o);
 }
 
 CadMesh load_surface_file(const std::string& path, const std::vector<int>& faces, double chordal_deflection_mm) {

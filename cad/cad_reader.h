@@ -16,6 +16,8 @@ struct CadOptions {
   double chordal_deflection_mm = 0.01;  // BRepMesh linear deflection (surface to triangle), mm
   double angular_deflection_rad = 0.1;  // BRepMesh angular deflection between neighbouring triangles
   double sewing_tolerance_mm = 0.01;    // faces whose edges lie this close are sewn (joined)
+  std::vector<int> fine_faces;          // of `faces`, these at fine_deflection_mm (the flank inside the part)
+  double fine_deflection_mm = 0;
   std::string validate() const;         // empty when valid
 };
 
@@ -53,6 +55,13 @@ struct CadFaces {
 // tenth of the clearance for the part (its tessellation error shifts the collision verdicts).
 [[nodiscard]] inline double surface_deflection_mm(double tolerance_mm) { return tolerance_mm / 20; }
 [[nodiscard]] inline double part_deflection_mm(double clearance_mm) { return clearance_mm / 10; }
+
+// The job's `part:`: every face at `part_deflection_mm`; when it is the surface's own model, the
+// surface's faces (all when `surface_faces` is empty) at `surface_deflection_mm`, so that the flank's
+// coarse part tessellation does not show up as a gouge of the fitted tool. Mesh files: load_mesh.
+[[nodiscard]] CadMesh load_part_file(const std::string& part, const std::string& surface,
+                                     const std::vector<int>& surface_faces, double part_deflection_mm,
+                                     double surface_deflection_mm);
 
 // True for the extensions load_cad reads (case-insensitive).
 [[nodiscard]] bool is_cad_file(const std::string& path);

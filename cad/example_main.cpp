@@ -49,11 +49,12 @@ int main(int argc, char** argv) {
     for (const char* name : {"blade_part.step", "blade_part.igs"}) {
       const std::string path = out + "/" + name, stem = std::filesystem::path(name).extension().string().substr(1);
       const CadMesh flank = load_surface_file(path, {1, 2}, surface_deflection_mm(tolerance));
-      const CadMesh part = load_surface_file(path, {}, part_deflection_mm(clearance));
+      const CadMesh part = load_part_file(path, path, {1, 2}, part_deflection_mm(clearance), surface_deflection_mm(tolerance));
       write_obj(out + "/flank-" + stem + ".obj", flank.loaded.mesh, path + " faces 1 2");
       write_obj(out + "/part-" + stem + ".obj", part.loaded.mesh, path + " every face");
-      std::printf("%s: flank %zu triangles at %.5f mm, part %zu triangles at %.3f mm\n", name, flank.loaded.mesh.faces.size(),
-                  surface_deflection_mm(tolerance), part.loaded.mesh.faces.size(), part_deflection_mm(clearance));
+      std::printf("%s: flank %zu triangles at %.5f mm, part %zu triangles at %.3f mm (faces 1 2 at %.5f mm)\n", name, flank.loaded.mesh.faces.size(),
+                  surface_deflection_mm(tolerance), part.loaded.mesh.faces.size(), part_deflection_mm(clearance),
+                  surface_deflection_mm(tolerance));
     }
     // The same blade side tessellated without OCCT: refine the grid until it deviates no more.
     BladeOptions bo = model.blade;

@@ -115,6 +115,40 @@ TEST_CASE("STEP and IGES blade faces tessellate within the chordal deflection of
   }
 }
 
+TEST_CASE("the part keeps the flank at the surface deflection and the rest coarse") {
+  const test::ScratchDir dir("cad-part");
+  const ExampleModelOptions model;
+  const Blade blade = analytic_blade(model);
+  const std::string path = dir.file("model.step");
+  write_example_model(path, model);
+  const double fine = 0.01, coarse = 0.5;
+  const CadMesh part = load_part_file(path, path, {1, 2}, coarse, fine);
+  CadOptions o;
+  o.faces = {1, 2};
+  o.chordal_deflection_mm = fine;
+  const CadMesh flank = load_cad(path, o);
+  const TriMesh& m = part.loaded.mesh;
+  REQUIRE(part.triangle_face.size() == m.faces.size());
+  CHECK(part.loaded.report.components == 2);
+  std::map<int, int> count;
+  double worst = 0;
+  for (size_t t = 0; t < m.faces.size(); ++t) {
+    ++count[part.triangle_face[t]];
+    if (part.triangle_face[t] > 2) continue;
+    const Eigen::Vector3d c =
+        (m.vertices[size_t(m.faces[t][0])] + m.vertices[size_t(m.faces[t][1])] + m.vertices[size_t(m.faces[t][2])]) / 3;
+    worst = std::max(worst, distance_to_blade(blade, c, model.blade.chord_from, model.blade.chord_to).distance_mm);
+  }
+  CHECK(worst <= fine);
+  CHECK(count[1] + count[2] == int(flank.loaded.mesh.faces.size()));  // the same triangles as the surface alone
+  // A different file is a different model: every face coarse.
+  const std::string copy = dir.file("copy.step");
+  std::filesystem::copy_file(path, copy);
+  const CadMesh other = load_part_file(copy, path, {1, 2}, coarse, fine);
+  CHECK(other.loaded.mesh.faces.size() < m.faces.size() / 2);
+  CHECK(error_of([&] { (void)load_part_file(path, path, {7}, coarse, fine); }).find("face 7 out of range") != std::string::npos);
+}
+
 TEST_CASE("faces are numbered in explode order with their type, area, box and neighbours") {
   const test::ScratchDir dir("cad-list");
   const ExampleModelOptions model;
