@@ -21,6 +21,7 @@ int main(int argc, char** argv) {
   register_command(&flankcam::cli::add_post_command);
   register_command(&flankcam::cli::add_run_command);
   register_command(&flankcam::cli::add_blade_command);
+  register_command(&flankcam::cli::add_faces_command);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,5 +1,7 @@
 #include "pipeline/fit_stage.h"
 
+#include "cad/cad_reader.h"
+
 #include <fmt/format.h>
 
 #include <cmath>
@@ -69,14 +71,21 @@ ToolAssembly assembly_of(const Job& job, const Similarity& fr, const FitResult& 
 
 void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   std::optional<LoadedMesh> separate;
-  if (job.part != job.surface) separate = load_mesh(job.part.string());
+  if (job.part_given)
+    separate = load_part_file(job.part.string(), job.surface.string(), job.surface_faces,
+                              job.part_deflection_mm.value_or(part_deflection_mm(job.clearance_mm)),
+                              job.surface_deflection_mm.value_or(surface_deflection_mm(job.tolerance_mm)))
+                   .loaded;
   const TriMesh& part = separate ? separate->mesh : f.surface.mesh;
   progress(fmt::format("collision checks against {} ({} triangles), clearance {} mm", job.part.string(), part.faces.size(),
                        job.clearance_mm));
   // The design surface in mm: contact points; it is the part too unless a separate one is given.
   const SurfaceIndex design(f.surface.mesh);
   std::optional<SurfaceIndex> separate_index;
-  if (separate) separate_index.emplace(separate->mesh);
+  if (separate) {
+    separate_index.emplace(separate->mesh);
+    f.part = separate->mesh;
+  }
   const SurfaceIndex& index = separate_index ? *separate_index : design;
   CollisionOptions o;
   o.clearance_mm = job.clearance_mm;
@@ -116,7 +125,10 @@ std::vector<std::string> collision_summary(const FittedPatch& p) {
 
 FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   FittedJob out;
-  out.surface = load_mesh(job.surface.string());
+  const CadMesh surface = load_surface_file(
+      job.surface.string(), job.surface_faces, job.surface_deflection_mm.value_or(surface_deflection_mm(job.tolerance_mm)));
+  if (!surface.note.empty()) progress(job.surface.string() + ": " + surface.note);
+  out.surface = surface.loaded;
   const TriMesh& mesh = out.surface.mesh;
   const BoundingBox box = bounding_box(mesh.vertices);
   progress(fmt::format("surface {}: {} vertices, {} triangles, diagonal {:.3f} mm", job.surface.string(),

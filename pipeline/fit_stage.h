@@ -3,6 +3,7 @@
 // into millimetres (report entries, CL-data). Files are written by outputs.h.
 #pragma once
 #include <functional>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -32,6 +33,7 @@ struct FittedJob {
   Similarity frame;    // mm -> unit frame
   TriMesh unit_surface;
   std::vector<FittedPatch> patches;
+  std::optional<TriMesh> part;  // the job's separate `part:` (mm) once checked; unset: the surface is the part
 };
 
 // Loads the design surface, fits every patch in the unit-diagonal frame (paper Sec. 4) and runs

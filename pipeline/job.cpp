@@ -8,6 +8,7 @@
 #include <set>
 
 #include "core/errors.h"
+#include "cad/cad_reader.h"
 #include "core/yaml_fields.h"
 #include "postproc/nc_program.h"
 
@@ -123,6 +124,36 @@ void read_post(const Reader& r, const YAML::Node& p, PostJob& post) {
   if (p["safe_height"]) post.safe_height_mm = in_range(r, p["safe_height"], "post.safe_height", 0, max_length_mm, "mm");
 }
 
+// KEY: FILE | {file: FILE, faces: [N, ...], deflection: MM}; faces and deflection only for STEP/IGES.
+struct FileKey {
+  std::filesystem::path path;
+  std::vector<int> faces;
+  std::optional<double> deflection_mm;
+};
+FileKey read_file_key(const Reader& r, const YAML::Node& n, const std::string& key, const std::filesystem::path& base,
+                      bool with_faces) {
+  FileKey out;
+  YAML::Node file = n;
+  std::string file_key = key;
+  if (n.IsMap()) {
+    r.only_keys(n, key, with_faces ? std::set<std::string>{"file", "faces", "deflection"} : std::set<std::string>{"file", "deflection"});
+    if (!n["file"]) r.fail(n, key + ".file", "missing");
+    file = n["file"], file_key = key + ".file";
+    if (const YAML::Node f = n["faces"]) {
+      if (!f.IsSequence() || f.size() == 0) r.fail(f, key + ".faces", "expected a list of face numbers from `flankcam faces`, e.g. [132]");
+      for (const YAML::Node& x : f) out.faces.push_back(r.integer(x, key + ".faces", 1, 10000000));
+    }
+    if (n["deflection"]) out.deflection_mm = r.positive(n["deflection"], key + ".deflection");
+  }
+  const std::filesystem::path p = r.text(file, file_key);
+  out.path = p.is_absolute() ? p : base / p;
+  if (!std::filesystem::is_regular_file(out.path)) r.fail(file, file_key, "file not found: " + out.path.string());
+  const bool cad = is_cad_file(out.path.string());
+  if (!out.faces.empty() && !cad) r.fail(n["faces"], key + ".faces", "only STEP/IGES models have faces");
+  if (out.deflection_mm && !cad) r.fail(n["deflection"], key + ".deflection", "only STEP/IGES models are tessellated by flankcam");
+  return out;
+}
+
 }  // namespace
 
 Job read_job(const std::filesystem::path& file) {
@@ -137,16 +168,12 @@ Job read_job(const std::filesystem::path& file) {
   job.file = file;
   if (!root["surface"]) throw InputError(name + ": surface: missing (the design surface mesh, mm)");
   const std::filesystem::path base = file.parent_path();
-  const std::filesystem::path surface = r.text(root["surface"], "surface");
-  job.surface = surface.is_absolute() ? surface : base / surface;
-  if (!std::filesystem::is_regular_file(job.surface))
-    r.fail(root["surface"], "surface", "file not found: " + job.surface.string());
-
+  const FileKey s = read_file_key(r, root["surface"], "surface", base, true);
+  job.surface = s.path, job.surface_faces = s.faces, job.surface_deflection_mm = s.deflection_mm;
   job.part = job.surface;
   if (root["part"]) {
-    const std::filesystem::path part = r.text(root["part"], "part");
-    job.part = part.is_absolute() ? part : base / part;
-    if (!std::filesystem::is_regular_file(job.part)) r.fail(root["part"], "part", "file not found: " + job.part.string());
+    const FileKey p = read_file_key(r, root["part"], "part", base, false);
+    job.part = p.path, job.part_deflection_mm = p.deflection_mm, job.part_given = true;
   }
   if (const YAML::Node h = root["holder"]) {
     r.only_keys(h, "holder", {"shank_length", "shank_diameter", "length", "diameter", "diameter_far", "cylinder_length"});

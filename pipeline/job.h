@@ -44,7 +44,11 @@ struct PostJob {
 struct Job {
   std::filesystem::path file;     // the job file itself
   std::filesystem::path surface;  // resolved against the job file's folder
+  std::vector<int> surface_faces;               // STEP/IGES: the flank's faces (1-based, `flankcam faces`); empty: all
+  std::optional<double> surface_deflection_mm;  // STEP/IGES chordal deflection; unset: tolerance / 20
   std::filesystem::path part;     // the whole part for collision checks (default: the surface)
+  std::optional<double> part_deflection_mm;     // STEP/IGES; unset: clearance / 10
+  bool part_given = false;                      // `part:` present (it may name the surface's own model)
   HolderJob holder;
   double clearance_mm = 1.0;      // shank and holder to part
   double feed_mm_min = 1000, spindle_rpm = 10000;  // for the CL-data

@@ -97,7 +97,7 @@ ViewerScene viewer_scene(const Job& job, const FittedJob& fitted, const std::vec
   ViewerScene v;
   v.tolerance_mm = job.tolerance_mm;
   v.surface_mm = fitted.surface.mesh;
-  if (job.part != job.surface) v.part_mm = load_mesh(job.part.string()).mesh;
+  if (fitted.part) v.part_mm = *fitted.part;
   std::vector<std::string> names;
   for (const FittedPatch& p : fitted.patches) {
     ViewerPatch vp{p.job->name, p.profile_mm, p.assembly, p.fit.machined.design_deviation, p.fit.machined.omega.mesh, p.poses, {}};
