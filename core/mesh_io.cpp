@@ -63,6 +63,7 @@ std::string read_whole_file(const std::string& path) {
   std::error_code ec;
   if (!fs::exists(path, ec)) throw InputError(path + ": file not found");
   if (fs::is_directory(path, ec)) throw InputError(path + ": is a directory, not a mesh file");
+  if (!fs::is_regular_file(path, ec)) throw InputError(path + ": is not a regular file");
   std::FILE* f = std::fopen(path.c_str(), "rb");
   if (!f) throw InputError(path + ": cannot read file");
   std::string data;
@@ -139,6 +140,16 @@ std::string_view next_token(const char*& p, const char* e) {
   return {b, size_t(p - b)};
 }
 
+// Values after those a line needs (a colour, w, a texture coordinate): numbers, not used.
+// A '#' ends the line.
+void check_trailing_numbers(const char* p, const char* e, const std::string& path, size_t line) {
+  for (std::string_view t = next_token(p, e); !t.empty() && t[0] != '#'; t = next_token(p, e)) {
+    double unused = 0;
+    if (parse_double(t, unused) != Parsed::ok || !std::isfinite(unused))
+      fail_line(path, line, fmt::format("'{}' is not a finite number", shown(t)));
+  }
+}
+
 // Lines of a text buffer, numbered from 1, without their end of line.
 struct LineReader {
   const char* p;
@@ -199,16 +210,12 @@ RawMesh read_obj(const std::string& path, const std::string& data) {
     if (kw == "v") {
       Eigen::Vector3d x;
       for (int k = 0; k < 3; ++k) x[k] = text_coordinate(next_token(p, e), path, lines.number);
-      for (std::string_view t = next_token(p, e); !t.empty(); t = next_token(p, e)) {
-        double extra = 0;  // w or a colour: must be a number, not used
-        if (parse_double(t, extra) != Parsed::ok || !std::isfinite(extra))
-          fail_line(path, lines.number, fmt::format("'{}' is not a finite number", shown(t)));
-      }
+      check_trailing_numbers(p, e, path, lines.number);  // w or a colour
       if (raw.mesh.vertices.size() >= kMaxVertices) fail_line(path, lines.number, "more than 2^31-1 vertices");
       raw.mesh.vertices.push_back(x);
     } else if (kw == "f") {
       corners.clear();
-      for (std::string_view t = next_token(p, e); !t.empty(); t = next_token(p, e)) {
+      for (std::string_view t = next_token(p, e); !t.empty() && t[0] != '#'; t = next_token(p, e)) {
         const size_t slash = t.find('/');
         long long i = 0;
         if (!parse_integer(t.substr(0, slash), i))
@@ -394,6 +401,7 @@ RawMesh read_off(const std::string& path, const std::string& data) {
     p = b;
     Eigen::Vector3d x;
     for (int k = 0; k < 3; ++k) x[k] = text_coordinate(next_token(p, e), path, lines.number);
+    check_trailing_numbers(p, e, path, lines.number);  // colour, normal, texture coordinates
     raw.mesh.vertices.push_back(x);
   }
   std::vector<int> corners;
@@ -414,6 +422,7 @@ RawMesh read_off(const std::string& path, const std::string& data) {
         fail_line(path, lines.number, fmt::format("face index {} is out of range (the file has {} vertices)", i, nv));
       corners.push_back(int(i));
     }
+    check_trailing_numbers(p, e, path, lines.number);  // a colour
     add_polygon(raw, corners);
   }
   return raw;
@@ -601,7 +610,7 @@ RawMesh read_ply(const std::string& path, const std::string& data) {
     for (const auto& prop : el.properties)
       per += format == PlyFormat::ascii ? 2 : ply_size(prop.is_list ? prop.count_type : prop.type);
     need += (unsigned __int128)el.count * per;
-    if (need > left + 1)
+    if (need > left + (format == PlyFormat::ascii ? 1 : 0))  // ascii: the last value needs no separator
       fail_line(path, el.line,
                 fmt::format("element {} declares {} entries but only {} bytes follow the header", shown(el.name), el.count,
                             uint64_t(left)));
@@ -643,6 +652,7 @@ RawMesh read_ply(const std::string& path, const std::string& data) {
       if (index_list < 0) fail_line(path, el.line, "face element has no vertex_indices list");
       raw.mesh.faces.reserve(size_t(el.count));
     }
+    if (el.properties.empty()) continue;  // nothing to read, however many entries it declares
     for (uint64_t i = 0; i < el.count; ++i) {
       Eigen::Vector3d x = Eigen::Vector3d::Zero();
       for (size_t k = 0; k < el.properties.size(); ++k) {

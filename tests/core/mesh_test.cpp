@@ -539,3 +539,23 @@ TEST_CASE("truncated and mutated files load or give an InputError, never anythin
   CHECK(loaded > 100);
   CHECK(refused > 100);
 }
+
+TEST_CASE("counts that need no bytes and values after the needed ones are checked too") {
+  ScratchDir dir("extra");
+  const std::string ply = dir.file("x.ply");
+  // An element without properties reads nothing, however many entries it declares.
+  write_text(ply, "ply\nformat ascii 1.0\nelement empty 9223372036854775807\nelement vertex 3\nproperty float x\n"
+                  "property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+                  "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n");
+  CHECK(load_mesh(ply).mesh.faces.size() == 1);
+  const std::string off = dir.file("x.off");
+  write_text(off, "COFF\n3 1 0\n0 0 0 1 1 1 1\n1 0 0 1 1 1 1\n0 1 0 1 1 1 1\n3 0 1 2 255 0 0\n");
+  CHECK(load_mesh(off).mesh.faces.size() == 1);
+  write_text(off, "COFF\n3 1 0\n0 0 0 1 1 1 1\n1 0 0 1 x 1 1\n0 1 0 1 1 1 1\n3 0 1 2\n");
+  CHECK(error_of(off) == off + ":4: 'x' is not a finite number");
+  const std::string obj = dir.file("x.obj");
+  write_text(obj, "v 0 0 0 # origin\nv 1 0 0 1 0 0\nv 0 1 0\nf 1 2 3 # one face\n");
+  CHECK(load_mesh(obj).mesh.faces.size() == 1);
+  write_text(obj, "v 0 0 0\nv 1 0 0 nan\nv 0 1 0\nf 1 2 3\n");
+  CHECK(error_of(obj) == obj + ":2: 'nan' is not a finite number");
+}
