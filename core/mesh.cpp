@@ -85,8 +85,8 @@ struct EdgeFaces {
 };
 
 // Turns faces so that every manifold edge is used once in each direction; returns flips.
-int orient_components(TriMesh& m) {
-  const EdgeFaces edges(m);
+// Afterwards `edges` still tells which faces share an edge, but its `k` is stale for flipped faces.
+int orient_components(TriMesh& m, const EdgeFaces& edges) {
   std::vector<int> state(m.faces.size(), -1);  // -1 unvisited, else 0/1 flipped
   int flips = 0;
   std::vector<int> stack;
@@ -118,6 +118,36 @@ int orient_components(TriMesh& m) {
       ++flips;
     }
   return flips;
+}
+
+// Edge-connected components.
+struct Components {
+  std::vector<int> of_face;
+  int count = 0;
+};
+Components label_components(const TriMesh& m, const EdgeFaces& edges) {
+  std::vector<int> component(m.faces.size(), -1);
+  int components = 0;
+  std::vector<int> stack;
+  for (int seed = 0; seed < int(m.faces.size()); ++seed) {
+    if (component[seed] >= 0) continue;
+    component[seed] = components;
+    stack.push_back(seed);
+    while (!stack.empty()) {
+      const int f = stack.back();
+      stack.pop_back();
+      for (int k = 0; k < 3; ++k) {
+        const auto [first, last] = edges.of(m.faces[f][k], m.faces[f][(k + 1) % 3]);
+        for (const auto* u = first; u != last; ++u)
+          if (component[u->face] < 0) {
+            component[u->face] = components;
+            stack.push_back(u->face);
+          }
+      }
+    }
+    ++components;
+  }
+  return {std::move(component), components};
 }
 
 }  // namespace
@@ -211,8 +241,9 @@ LoadedMesh clean_mesh(TriMesh mesh, const std::string& what) {
     for (int& i : f) i = new_index[i];
     out.mesh.faces.push_back(f);
   }
-  out.report.flipped_to_orient = orient_components(out.mesh);
-  out.report.components = mesh_topology(out.mesh).components;
+  const EdgeFaces edges(out.mesh);  // flipping keeps which faces share an edge
+  out.report.flipped_to_orient = orient_components(out.mesh, edges);
+  out.report.components = label_components(out.mesh, edges).count;
   return out;
 }
 
@@ -234,7 +265,6 @@ MeshTopology mesh_topology(const TriMesh& m) {
   MeshTopology t;
   t.boundary_edge.assign(m.faces.size(), {false, false, false});
   t.boundary_vertex.assign(m.vertices.size(), 0);
-  t.component.assign(m.faces.size(), -1);
   const EdgeFaces edges(m);
   for (size_t v = 0; v + 1 < edges.start.size(); ++v)  // an edge with one use is a boundary edge
     for (int i = edges.start[v]; i < edges.start[v + 1]; ++i) {
@@ -247,25 +277,9 @@ MeshTopology mesh_topology(const TriMesh& m) {
       t.boundary_vertex[m.faces[u.face][(u.k + 1) % 3]] = 1;
       ++t.boundary_edges;
     }
-  std::vector<int> stack;
-  for (int seed = 0; seed < int(m.faces.size()); ++seed) {
-    if (t.component[seed] >= 0) continue;
-    t.component[seed] = t.components;
-    stack.push_back(seed);
-    while (!stack.empty()) {
-      const int f = stack.back();
-      stack.pop_back();
-      for (int k = 0; k < 3; ++k) {
-        const auto [first, last] = edges.of(m.faces[f][k], m.faces[f][(k + 1) % 3]);
-        for (const auto* u = first; u != last; ++u)
-          if (t.component[u->face] < 0) {
-            t.component[u->face] = t.components;
-            stack.push_back(u->face);
-          }
-      }
-    }
-    ++t.components;
-  }
+  Components c = label_components(m, edges);
+  t.component = std::move(c.of_face);
+  t.components = c.count;
   return t;
 }
 
