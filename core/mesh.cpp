@@ -1,25 +1,12 @@
 #include "core/mesh.h"
 
 #include <Eigen/Geometry>
-
-// OpenMesh's property containers (VectorT default constructors) trip GCC 12's
-// -Wmaybe-uninitialized when instantiated here; the warning is in OpenMesh, not ours.
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#include <OpenMesh/Core/IO/MeshIO.hh>
-#include <OpenMesh/Core/Mesh/PolyMesh_ArrayKernelT.hh>
 #include <fmt/format.h>
-#include <fmt/os.h>
 
 #include <algorithm>
 #include <cmath>
-#include <filesystem>
-#include <fstream>
-#include <map>
-#include <numeric>
-#include <set>
-#include <sstream>
-#include <tuple>
-#include <unordered_map>
+#include <cstdint>
+#include <cstring>
 
 #include "core/atomic_file.h"
 #include "core/errors.h"
@@ -27,57 +14,79 @@
 namespace flankcam {
 namespace {
 
-struct DoubleTraits : OpenMesh::DefaultTraits {
-  typedef OpenMesh::Vec3d Point;
-  typedef OpenMesh::Vec3d Normal;
-};
-using OMPolyMesh = OpenMesh::PolyMesh_ArrayKernelT<DoubleTraits>;
-
-std::string lower_extension(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return std::tolower(c); });
-  return ext;
-}
-
-// OpenMesh reads "nan" in an OBJ as a stream failure; check the text ourselves for
-// the textual formats so that a NaN is an error, not a silent zero.
-void reject_textual_nonfinite(const std::string& path, const std::string& ext) {
-  if (ext != ".obj" && ext != ".off") return;
-  std::ifstream in(path);
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    std::string lower = line;
-    std::transform(lower.begin(), lower.end(), lower.begin(), [](unsigned char c) { return std::tolower(c); });
-    if (ext == ".obj" && lower.rfind("v ", 0) != 0) continue;
-    if (lower.find("nan") != std::string::npos || lower.find("inf") != std::string::npos)
-      throw InputError(fmt::format("{}:{}: vertex coordinate is NaN or infinite", path, line_no));
-  }
-}
-
 std::array<int, 3> sorted(std::array<int, 3> f) {
   std::sort(f.begin(), f.end());
   return f;
 }
 
-uint64_t edge_key(int a, int b) {
-  if (a > b) std::swap(a, b);
-  return (uint64_t(uint32_t(a)) << 32) | uint32_t(b);
+uint64_t mix(uint64_t h) {  // murmur3's finaliser
+  h ^= h >> 33;
+  h *= 0xff51afd7ed558ccdULL;
+  h ^= h >> 33;
+  h *= 0xc4ceb9fe1a85ec53ULL;
+  return h ^ (h >> 33);
 }
 
-// Faces sharing each undirected edge, in face order.
-std::unordered_map<uint64_t, std::vector<std::pair<int, int>>> edge_faces(const TriMesh& m) {
-  std::unordered_map<uint64_t, std::vector<std::pair<int, int>>> edges;
-  edges.reserve(m.faces.size() * 2);
-  for (int f = 0; f < int(m.faces.size()); ++f)
-    for (int k = 0; k < 3; ++k) edges[edge_key(m.faces[f][k], m.faces[f][(k + 1) % 3])].push_back({f, k});
-  return edges;
+uint64_t bits(double v) {
+  v += 0.0;  // -0 and +0 are equal coordinates: one hash
+  uint64_t b;
+  std::memcpy(&b, &v, sizeof b);
+  return b;
 }
+
+// For each i < n in order, the first j <= i whose key equals i's. Open addressing over
+// indices: the answer depends only on the order of the keys, never on a hash map's iteration.
+template <class Hash, class Equal>
+std::vector<int> first_occurrence(int n, const Hash& hash, const Equal& equal) {
+  size_t capacity = 16;
+  while (capacity < 2 * size_t(n)) capacity *= 2;
+  const size_t mask = capacity - 1;
+  std::vector<int> slot(capacity, -1);
+  std::vector<int> first(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    size_t h = hash(i) & mask;
+    while (slot[h] >= 0 && !equal(slot[h], i)) h = (h + 1) & mask;
+    if (slot[h] < 0) slot[h] = i;
+    first[size_t(i)] = slot[h];
+  }
+  return first;
+}
+
+// Each undirected edge's faces, in face order: half-edges grouped by their smaller vertex
+// (counting sort, O(n)), sorted by the other vertex within a group for a binary search.
+struct EdgeFaces {
+  struct Use {
+    int other, face, k;  // edge k of `face` joins its smaller vertex to `other`
+  };
+  std::vector<int> start;  // per vertex, into uses; one past the end at the back
+  std::vector<Use> uses;
+
+  explicit EdgeFaces(const TriMesh& m) : start(m.vertices.size() + 1, 0), uses(3 * m.faces.size()) {
+    for (const auto& f : m.faces)
+      for (int k = 0; k < 3; ++k) ++start[size_t(std::min(f[k], f[(k + 1) % 3])) + 1];
+    for (size_t v = 1; v < start.size(); ++v) start[v] += start[v - 1];
+    std::vector<int> fill(start.begin(), start.end() - 1);
+    for (int f = 0; f < int(m.faces.size()); ++f)
+      for (int k = 0; k < 3; ++k) {
+        const int a = m.faces[f][k], b = m.faces[f][(k + 1) % 3];
+        uses[size_t(fill[size_t(std::min(a, b))]++)] = {std::max(a, b), f, k};
+      }
+    for (size_t v = 0; v + 1 < start.size(); ++v)
+      std::sort(uses.begin() + start[v], uses.begin() + start[v + 1],
+                [](const Use& x, const Use& y) { return std::tie(x.other, x.face, x.k) < std::tie(y.other, y.face, y.k); });
+  }
+  // The uses of edge {a, b}: [first, last), in face order.
+  [[nodiscard]] std::pair<const Use*, const Use*> of(int a, int b) const {
+    if (a > b) std::swap(a, b);
+    const Use* lo = uses.data() + start[size_t(a)];
+    const Use* hi = uses.data() + start[size_t(a) + 1];
+    return std::equal_range(lo, hi, Use{b, 0, 0}, [](const Use& x, const Use& y) { return x.other < y.other; });
+  }
+};
 
 // Turns faces so that every manifold edge is used once in each direction; returns flips.
-int orient_components(TriMesh& m) {
-  const auto edges = edge_faces(m);
+// Afterwards `edges` still tells which faces share an edge, but its `k` is stale for flipped faces.
+int orient_components(TriMesh& m, const EdgeFaces& edges) {
   std::vector<int> state(m.faces.size(), -1);  // -1 unvisited, else 0/1 flipped
   int flips = 0;
   std::vector<int> stack;
@@ -91,9 +100,10 @@ int orient_components(TriMesh& m) {
       for (int k = 0; k < 3; ++k) {
         int u = m.faces[f][k], v = m.faces[f][(k + 1) % 3];
         if (state[f]) std::swap(u, v);
-        const auto& users = edges.at(edge_key(u, v));
-        if (users.size() != 2) continue;
-        const auto [g, kg] = users[0].first == f ? users[1] : users[0];
+        const auto [first, last] = edges.of(u, v);
+        if (last - first != 2) continue;
+        const EdgeFaces::Use& other = first->face == f ? first[1] : first[0];
+        const int g = other.face, kg = other.k;
         if (state[g] >= 0) continue;
         // g runs its edge the same way as (the possibly flipped) f: g must be flipped.
         const bool same_direction = m.faces[g][kg] == u;
@@ -108,6 +118,36 @@ int orient_components(TriMesh& m) {
       ++flips;
     }
   return flips;
+}
+
+// Edge-connected components.
+struct Components {
+  std::vector<int> of_face;
+  int count = 0;
+};
+Components label_components(const TriMesh& m, const EdgeFaces& edges) {
+  std::vector<int> component(m.faces.size(), -1);
+  int components = 0;
+  std::vector<int> stack;
+  for (int seed = 0; seed < int(m.faces.size()); ++seed) {
+    if (component[seed] >= 0) continue;
+    component[seed] = components;
+    stack.push_back(seed);
+    while (!stack.empty()) {
+      const int f = stack.back();
+      stack.pop_back();
+      for (int k = 0; k < 3; ++k) {
+        const auto [first, last] = edges.of(m.faces[f][k], m.faces[f][(k + 1) % 3]);
+        for (const auto* u = first; u != last; ++u)
+          if (component[u->face] < 0) {
+            component[u->face] = components;
+            stack.push_back(u->face);
+          }
+      }
+    }
+    ++components;
+  }
+  return {std::move(component), components};
 }
 
 }  // namespace
@@ -144,19 +184,17 @@ LoadedMesh clean_mesh(TriMesh mesh, const std::string& what) {
   for (const auto& v : mesh.vertices)
     if (!v.allFinite()) throw InputError(what + ": vertex coordinate is NaN or infinite");
 
-  // Weld exactly coincident vertices (readers split non-manifold fans and seams).
-  std::map<std::tuple<double, double, double>, int> weld;
-  std::vector<int> remap(mesh.vertices.size());
-  for (size_t i = 0; i < mesh.vertices.size(); ++i) {
-    const auto& v = mesh.vertices[i];
-    remap[i] = weld.emplace(std::make_tuple(v.x(), v.y(), v.z()), int(i)).first->second;
-  }
+  // Weld exactly coincident vertices (readers split non-manifold fans and seams; STL
+  // has no shared vertices at all): each goes to its first occurrence.
+  const auto& V = mesh.vertices;
+  const std::vector<int> remap = first_occurrence(
+      int(V.size()), [&](int i) { return mix(bits(V[i].x()) ^ mix(bits(V[i].y()) ^ mix(bits(V[i].z())))); },
+      [&](int i, int j) { return V[i] == V[j]; });
   const double diag = bounding_box(mesh.vertices).diagonal();
   const double min_area = 1e-14 * diag * diag;  // relative: zero area to rounding
 
-  std::set<std::array<int, 3>> seen;
-  std::vector<std::array<int, 3>> faces;
-  faces.reserve(mesh.faces.size());
+  std::vector<std::array<int, 3>> candidates, keys;
+  candidates.reserve(mesh.faces.size());
   for (auto f : mesh.faces) {
     for (int& i : f) i = remap[i];
     if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) {
@@ -170,11 +208,22 @@ LoadedMesh clean_mesh(TriMesh mesh, const std::string& what) {
       ++out.report.dropped_degenerate;
       continue;
     }
-    if (!seen.insert(sorted(f)).second) {
+    candidates.push_back(f);
+  }
+  // A triangle on the same three vertices as an earlier one is a duplicate.
+  keys.reserve(candidates.size());
+  for (const auto& f : candidates) keys.push_back(sorted(f));
+  const std::vector<int> first_face = first_occurrence(
+      int(keys.size()), [&](int i) { return mix(uint64_t(uint32_t(keys[i][0])) << 32 | uint32_t(keys[i][1])) ^ mix(uint64_t(keys[i][2])); },
+      [&](int i, int j) { return keys[i] == keys[j]; });
+  std::vector<std::array<int, 3>> faces;
+  faces.reserve(candidates.size());
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    if (first_face[i] != int(i)) {
       ++out.report.dropped_duplicate;
       continue;
     }
-    faces.push_back(f);
+    faces.push_back(candidates[i]);
   }
   if (faces.empty()) throw InputError(what + ": mesh has no (non-degenerate) triangles");
 
@@ -192,56 +241,9 @@ LoadedMesh clean_mesh(TriMesh mesh, const std::string& what) {
     for (int& i : f) i = new_index[i];
     out.mesh.faces.push_back(f);
   }
-  out.report.flipped_to_orient = orient_components(out.mesh);
-  out.report.components = mesh_topology(out.mesh).components;
-  return out;
-}
-
-LoadedMesh load_mesh(const std::string& path) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  if (!fs::exists(path, ec)) throw InputError(path + ": file not found");
-  if (fs::is_directory(path, ec)) throw InputError(path + ": is a directory, not a mesh file");
-  {
-    std::ifstream probe(path, std::ios::binary);
-    if (!probe) throw InputError(path + ": cannot read file");
-    if (probe.peek() == std::ifstream::traits_type::eof()) throw InputError(path + ": file is empty");
-  }
-  const std::string ext = lower_extension(path);
-  if (ext != ".obj" && ext != ".stl" && ext != ".off" && ext != ".ply")
-    throw InputError(path + ": unknown mesh format '" + ext + "' (use .obj, .stl, .off or .ply)");
-  reject_textual_nonfinite(path, ext);
-
-  OMPolyMesh om;
-  OpenMesh::IO::Options opt;
-  std::ostringstream messages;
-  omerr().connect(messages);
-  omerr().disable();
-  const bool ok = OpenMesh::IO::read_mesh(om, path, opt);
-  omerr().enable();
-  omerr().disconnect(messages);
-  if (!ok) throw InputError(path + ": cannot parse as " + ext.substr(1) + " mesh");
-
-  TriMesh raw;
-  raw.vertices.reserve(om.n_vertices());
-  for (const auto& vh : om.vertices()) {
-    const auto& p = om.point(vh);
-    raw.vertices.emplace_back(p[0], p[1], p[2]);
-  }
-  int polygons = 0;
-  for (const auto& fh : om.faces()) {
-    std::vector<int> corners;
-    for (const auto& vh : om.fv_range(fh)) corners.push_back(vh.idx());
-    if (corners.size() > 3) ++polygons;
-    for (size_t k = 1; k + 1 < corners.size(); ++k) raw.faces.push_back({corners[0], corners[k], corners[k + 1]});
-  }
-  if (raw.faces.empty()) throw InputError(path + ": mesh has no faces");
-  LoadedMesh out = clean_mesh(std::move(raw), path);
-  out.report.polygons_triangulated = polygons;
-  // Faces OpenMesh refused outright (equal corners) count as degenerate.
-  const std::string log = messages.str();
-  for (size_t pos = log.find("equal vertices"); pos != std::string::npos; pos = log.find("equal vertices", pos + 1))
-    ++out.report.dropped_degenerate;
+  const EdgeFaces edges(out.mesh);  // flipping keeps which faces share an edge
+  out.report.flipped_to_orient = orient_components(out.mesh, edges);
+  out.report.components = label_components(out.mesh, edges).count;
   return out;
 }
 
@@ -263,33 +265,21 @@ MeshTopology mesh_topology(const TriMesh& m) {
   MeshTopology t;
   t.boundary_edge.assign(m.faces.size(), {false, false, false});
   t.boundary_vertex.assign(m.vertices.size(), 0);
-  t.component.assign(m.faces.size(), -1);
-  const auto edges = edge_faces(m);
-  for (const auto& [key, users] : edges) {
-    if (users.size() != 1) continue;
-    const auto [f, k] = users[0];
-    t.boundary_edge[f][k] = true;
-    t.boundary_vertex[m.faces[f][k]] = 1;
-    t.boundary_vertex[m.faces[f][(k + 1) % 3]] = 1;
-    ++t.boundary_edges;
-  }
-  std::vector<int> stack;
-  for (int seed = 0; seed < int(m.faces.size()); ++seed) {
-    if (t.component[seed] >= 0) continue;
-    t.component[seed] = t.components;
-    stack.push_back(seed);
-    while (!stack.empty()) {
-      const int f = stack.back();
-      stack.pop_back();
-      for (int k = 0; k < 3; ++k)
-        for (const auto& [g, kg] : edges.at(edge_key(m.faces[f][k], m.faces[f][(k + 1) % 3])))
-          if (t.component[g] < 0) {
-            t.component[g] = t.components;
-            stack.push_back(g);
-          }
+  const EdgeFaces edges(m);
+  for (size_t v = 0; v + 1 < edges.start.size(); ++v)  // an edge with one use is a boundary edge
+    for (int i = edges.start[v]; i < edges.start[v + 1]; ++i) {
+      const auto& u = edges.uses[size_t(i)];
+      if ((i > edges.start[v] && edges.uses[size_t(i) - 1].other == u.other) ||
+          (i + 1 < edges.start[v + 1] && edges.uses[size_t(i) + 1].other == u.other))
+        continue;
+      t.boundary_edge[u.face][u.k] = true;
+      t.boundary_vertex[m.faces[u.face][u.k]] = 1;
+      t.boundary_vertex[m.faces[u.face][(u.k + 1) % 3]] = 1;
+      ++t.boundary_edges;
     }
-    ++t.components;
-  }
+  Components c = label_components(m, edges);
+  t.component = std::move(c.of_face);
+  t.components = c.count;
   return t;
 }
 

@@ -1,4 +1,4 @@
-// Triangle meshes: reading (through OpenMesh), cleaning, topology, normals,
+// Triangle meshes: reading (checked readers, core/mesh_io.cpp), cleaning, topology, normals,
 // and the similarity that maps input millimetres to the paper's unit-diagonal frame.
 #pragma once
 #include <Eigen/Core>
@@ -27,8 +27,12 @@ struct LoadedMesh {
   MeshReadReport report;
 };
 
-// Reads OBJ, STL (ASCII/binary), OFF or PLY. Throws InputError naming the file for:
-// missing/unreadable file, unknown format, no triangles, NaN/inf coordinates.
+// Reads OBJ, STL (ASCII/binary), OFF or PLY (ASCII, binary either endian) in double precision,
+// fan-triangulates polygons, then cleans like clean_mesh (which also welds STL's unshared corners).
+// Throws InputError "FILE:LINE: what" (text) or "FILE: byte N: what" (binary) for: a missing or
+// unreadable file, an unknown format, a malformed header or token, counts the file cannot hold,
+// a face index out of range, a coordinate that is NaN, infinite or beyond 1e15 mm; and
+// "FILE: mesh has no ..." when no triangle is left.
 [[nodiscard]] LoadedMesh load_mesh(const std::string& path);
 
 // Cleans a mesh built in memory the same way the reader does: drops degenerate and
