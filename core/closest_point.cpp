@@ -73,6 +73,14 @@ struct Node {
     const double o2 = std::max(0.0, std::abs(double(R[6]) * x + double(R[7]) * y + double(R[8]) * z - double(m[2])) - double(e[2]));
     return o0 * o0 + o1 * o1 + o2 * o2;
   }
+  // Signed depth of p in the box: the largest |local| - e (negative inside). Orders two children
+  // that both contain p: the one p is deeper in is more likely to hold its footpoint.
+  double depth(double x, double y, double z) const {
+    const double o0 = std::abs(double(R[0]) * x + double(R[1]) * y + double(R[2]) * z - double(m[0])) - double(e[0]);
+    const double o1 = std::abs(double(R[3]) * x + double(R[4]) * y + double(R[5]) * z - double(m[1])) - double(e[1]);
+    const double o2 = std::abs(double(R[6]) * x + double(R[7]) * y + double(R[8]) * z - double(m[2])) - double(e[2]);
+    return std::max({o0, o1, o2});
+  }
 };
 constexpr double kFrameError = 1e-6;
 
@@ -333,7 +341,9 @@ int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
       }
       const int l = node.first;
       const double dl = nodes[size_t(l)].distance2(px, py, pz), dr = nodes[size_t(l) + 1].distance2(px, py, pz);
-      const bool left_first = !(dr < dl);
+      const bool left_first = dl == dr && dl == 0
+                                  ? !(nodes[size_t(l) + 1].depth(px, py, pz) < nodes[size_t(l)].depth(px, py, pz))
+                                  : !(dr < dl);
       const int near = left_first ? l : l + 1, far = left_first ? l + 1 : l;
       const double dn = left_first ? dl : dr, dfar = left_first ? dr : dl;
       if (dfar <= prune2) stack[top++] = {far, dfar};
