@@ -1,11 +1,11 @@
 #include "core/closest_point.h"
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
-#include <flann/flann.hpp>
-
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numeric>
 
 namespace flankcam {
 
@@ -42,8 +42,6 @@ TrianglePoint closest_on_triangle(const Eigen::Vector3d& p, const Eigen::Vector3
 
 namespace {
 
-using KdTree = flann::KDTreeSingleIndex<flann::L2_Simple<double>>;
-
 // Largest distance from a point of the triangle to its nearest corner: the
 // circumradius for non-obtuse triangles, half the longest edge otherwise.
 double covering_radius_of(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c) {
@@ -54,22 +52,88 @@ double covering_radius_of(const Eigen::Vector3d& a, const Eigen::Vector3d& b, co
   return std::sqrt(A * B * C) / (2 * area2);
 }
 
+
+// Oriented bounding box of a node: local = R (p - c), |local_k| <= e_k. R's rows are the
+// principal axes of the node's vertices, so on a smooth surface the box is thin along the
+// normal and the lower bound stays tight at any query distance (an axis-aligned box is as thick
+// as the patch is tilted, and the number of boxes it cannot prune grows like √n at one tool
+// radius off the surface).
+struct Node {
+  float R[9];      // rows: the principal axes, rounded to float (the extents are measured in this frame)
+  float m[3];      // centre of the box in that frame
+  float e[3];      // half extents, rounded up
+  int first = 0;   // leaf: first slot in Impl::tri; inner: index of the left child (right = first + 1)
+  int count = 0;   // leaf: number of faces; 0 for inner nodes
+
+  // Squared distance from p to the box (0 inside), in the box's frame. The float axes are unit and
+  // orthogonal to 1e-7, so this exceeds the true distance by at most a factor 1 + kFrameError.
+  double distance2(double x, double y, double z) const {
+    const double o0 = std::max(0.0, std::abs(double(R[0]) * x + double(R[1]) * y + double(R[2]) * z - double(m[0])) - double(e[0]));
+    const double o1 = std::max(0.0, std::abs(double(R[3]) * x + double(R[4]) * y + double(R[5]) * z - double(m[1])) - double(e[1]));
+    const double o2 = std::max(0.0, std::abs(double(R[6]) * x + double(R[7]) * y + double(R[8]) * z - double(m[2])) - double(e[2]));
+    return o0 * o0 + o1 * o1 + o2 * o2;
+  }
+  // Signed depth of p in the box: the largest |local| - e (negative inside). Orders two children
+  // that both contain p: the one p is deeper in is more likely to hold its footpoint.
+  double depth(double x, double y, double z) const {
+    const double o0 = std::abs(double(R[0]) * x + double(R[1]) * y + double(R[2]) * z - double(m[0])) - double(e[0]);
+    const double o1 = std::abs(double(R[3]) * x + double(R[4]) * y + double(R[5]) * z - double(m[1])) - double(e[1]);
+    const double o2 = std::abs(double(R[6]) * x + double(R[7]) * y + double(R[8]) * z - double(m[2])) - double(e[2]);
+    return std::max({o0, o1, o2});
+  }
+};
+constexpr double kFrameError = 1e-6;
+
+// A face in leaf order: corners, unit normal and plane offset (the plane distance bounds the face
+// distance from below and skips most faces of a leaf cheaply).
+struct LeafFace {
+  Eigen::Vector3d a, b, c, n;
+  double offset;
+  int face;
+};
+
+constexpr int kLeafFaces = 4;
+
+// The order both searches pick by: smaller squared distance, then the lower face index; a NaN
+// distance (a degenerate triangle) counts as infinite. Updates (best2, face) and says whether f won.
+inline bool closer(double d2, int f, double& best2, int& face) {
+  if (std::isnan(d2)) d2 = std::numeric_limits<double>::infinity();
+  if (face >= 0 && !(d2 < best2 || (d2 == best2 && f < face))) return false;
+  best2 = d2;
+  face = f;
+  return true;
+}
+
+// The answer for a query that is not finite: no face, infinite distance, NaN point, and marked
+// as beyond the boundary so that callers which skip samples off Φ's rim skip it too.
+Footpoint no_footpoint() {
+  Footpoint f;
+  f.point = f.normal = f.barycentric = Eigen::Vector3d::Constant(std::numeric_limits<double>::quiet_NaN());
+  f.distance = std::numeric_limits<double>::infinity();
+  f.face = -1;
+  f.on_boundary = true;
+  return f;
+}
+
 }  // namespace
 
 struct SurfaceIndex::Impl {
   TriMesh mesh;
   std::vector<Eigen::Vector3d> normals;
   MeshTopology topology;
-  std::vector<int> vf_start, vf_faces;  // vertex -> incident faces (CSR)
-  std::vector<double> reach;            // per vertex: farthest point of an incident face
   double cover = 0;
-  std::unique_ptr<KdTree> tree;
+  std::vector<Node> nodes;                  // nodes[0] is the root
+  std::vector<LeafFace> tri;                // the faces in leaf order
+  double slack = 0;                         // absolute rounding allowance of the box bounds
 
   double face_distance2(int f, const Eigen::Vector3d& p) const {
     const auto& F = mesh.faces[f];
     return (closest_on_triangle(p, mesh.vertices[F[0]], mesh.vertices[F[1]], mesh.vertices[F[2]]).point - p)
         .squaredNorm();
   }
+
+  void build();
+  int search(const Eigen::Vector3d& p) const;
 
   Footpoint make_footpoint(const Eigen::Vector3d& p, int f) const {
     const auto& F = mesh.faces[f];
@@ -92,88 +156,213 @@ struct SurfaceIndex::Impl {
   }
 };
 
-namespace {
+// Top-down: each node's axes are the principal axes of its faces' corners (of at most 64 faces),
+// split at the median centroid along the axis of largest spread. Nodes of up to kExactFaces faces measure their extents on the corners; bigger ones enclose their children's
+// boxes (8 corners each, bottom-up), which is looser but costs O(1) per node. Deterministic: the
+// median is found on (projection, face index) pairs.
+void SurfaceIndex::Impl::build() {
+  constexpr int kExactFaces = 4096;
+  const int nf = int(mesh.faces.size());
+  std::vector<std::pair<double, int>> order(static_cast<size_t>(nf));
+  std::vector<Eigen::Vector3d> centroid(static_cast<size_t>(nf));
+  double scale = 0;
+  for (const auto& v : mesh.vertices) scale = std::max(scale, v.cwiseAbs().maxCoeff());
+  for (int f = 0; f < nf; ++f) {
+    const auto& F = mesh.faces[size_t(f)];
+    centroid[size_t(f)] = (mesh.vertices[size_t(F[0])] + mesh.vertices[size_t(F[1])] + mesh.vertices[size_t(F[2])]) / 3;
+    order[size_t(f)] = {0.0, f};
+  }
+  // A few thousand ulps of the largest coordinate: covers the rounding of the box bounds and of
+  // the triangle distances, so a box never prunes a face brute force would pick.
+  slack = 1e-12 * scale + std::numeric_limits<double>::min();
+  nodes.reserve(size_t(2 * (nf / kLeafFaces + 1)));
+  tri.reserve(size_t(nf));
+  std::vector<char> merge;  // per node: extents from the children
 
-// A FLANN result set that never stores anything: each vertex the kd-tree reports
-// has its incident faces tested at once, and the search radius shrinks with the
-// best distance found (radius = best + covering radius, squared for FLANN's L2).
-class NearestFaceVisitor final : public flann::ResultSet<double> {
- public:
-  NearestFaceVisitor(const SurfaceIndex::Impl& s, const Eigen::Vector3d& p) : s_(s), p_(p) { seen_.fill(-1); }
-  bool full() const override { return true; }
-  double worstDist() const override { return radius2_; }
-  void addPoint(double dist2, size_t vertex) override {
-    if (dist2 >= radius2_) return;
-    const double dv = std::sqrt(dist2);
-    if (dv - s_.reach[vertex] > best_) return;  // no incident face can come closer
-    for (int i = s_.vf_start[vertex]; i < s_.vf_start[vertex + 1]; ++i) {
-      const int f = s_.vf_faces[i];
-      if (!first_visit(f)) continue;
-      const double d2 = s_.face_distance2(f, p_);
-      if (d2 < best2_ || (d2 == best2_ && f < face_)) {
-        best2_ = d2;
-        face_ = f;
-        best_ = std::sqrt(d2);
-        const double r = best_ + s_.cover;
-        radius2_ = r * r * (1 + 1e-12) + 1e-300;
+  // Stores the frame R (rounded to float) and the extents of `points` in it, widened for rounding.
+  const auto set_box = [&](Node& node, const Eigen::Matrix3d& R, const auto& for_each_point) {
+    Eigen::Matrix3d Rf;
+    for (int i = 0; i < 9; ++i) node.R[i] = float(R(i / 3, i % 3)), Rf(i / 3, i % 3) = double(node.R[i]);
+    Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+    for_each_point([&](const Eigen::Vector3d& x) {
+      const Eigen::Vector3d l = Rf * x;
+      lo = lo.cwiseMin(l);
+      hi = hi.cwiseMax(l);
+    });
+    for (int k = 0; k < 3; ++k) {
+      node.m[k] = float(0.5 * (lo[k] + hi[k]));
+      const double half = std::max(hi[k] - double(node.m[k]), double(node.m[k]) - lo[k]);
+      const double wide = half + 4 * slack + 1e-12 * std::abs(double(node.m[k]));
+      node.e[k] = float(wide);
+      if (double(node.e[k]) < wide) node.e[k] = std::nextafter(node.e[k], INFINITY);
+    }
+  };
+
+  struct Range {
+    int node, begin, end;
+  };
+  std::vector<Range> todo;
+  nodes.emplace_back();
+  merge.push_back(0);
+  todo.push_back({0, 0, nf});
+  while (!todo.empty()) {
+    const Range r = todo.back();
+    todo.pop_back();
+    const int count = r.end - r.begin;
+    const int stride = std::max(1, count / 64);
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    int used = 0;
+    for (int k = r.begin; k < r.end; k += stride, ++used) mean += centroid[size_t(order[size_t(k)].second)];
+    mean /= double(used);
+    // Principal axes of the corners (of every stride-th face: at most 64 faces per node).
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (int k = r.begin; k < r.end; k += stride)
+      for (int v : mesh.faces[size_t(order[size_t(k)].second)]) {
+        const Eigen::Vector3d d = mesh.vertices[size_t(v)] - mean;
+        cov += d * d.transpose();
       }
+    Eigen::Matrix3d R = Eigen::Matrix3d::Identity();  // rows: axes, the first of largest spread
+    if (cov.allFinite() && cov.norm() > 0) {
+      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig;
+      eig.computeDirect(cov);
+      const Eigen::Matrix3d Q = eig.eigenvectors();  // columns, ascending eigenvalues
+      Eigen::Matrix3d Rn;
+      Rn.row(0) = Q.col(2).normalized().transpose();
+      Rn.row(1) = Q.col(1).normalized().transpose();
+      Rn.row(2) = Rn.row(0).cross(Rn.row(1)).normalized();
+      Rn.row(1) = Rn.row(2).cross(Rn.row(0)).normalized();
+      if (Rn.allFinite()) R = Rn;
+    }
+    const auto corners = [&](const auto& f) {
+      for (int k = r.begin; k < r.end; ++k)
+        for (int v : mesh.faces[size_t(order[size_t(k)].second)]) f(mesh.vertices[size_t(v)]);
+    };
+    if (count <= kExactFaces) {
+      set_box(nodes[size_t(r.node)], R, corners);
+    } else {
+      for (int i = 0; i < 9; ++i) nodes[size_t(r.node)].R[i] = float(R(i / 3, i % 3));
+      merge[size_t(r.node)] = 1;
+    }
+    if (count <= kLeafFaces) {
+      Node& node = nodes[size_t(r.node)];
+      node.first = int(tri.size());
+      node.count = count;
+      std::sort(order.begin() + r.begin, order.begin() + r.end,
+                [](const auto& x, const auto& y) { return x.second < y.second; });
+      for (int k = r.begin; k < r.end; ++k) {
+        const auto& F = mesh.faces[size_t(order[size_t(k)].second)];
+        LeafFace t;
+        t.a = mesh.vertices[size_t(F[0])], t.b = mesh.vertices[size_t(F[1])], t.c = mesh.vertices[size_t(F[2])];
+        const Eigen::Vector3d n = (t.b - t.a).cross(t.c - t.a);
+        const double len = n.norm();
+        t.n = len > 0 && std::isfinite(len) ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
+        t.offset = t.n.dot(t.a);
+        t.face = order[size_t(k)].second;
+        tri.push_back(t);
+      }
+      continue;
+    }
+    // Split at the median along the box's longest axis (the axis of largest variance on big nodes).
+    int axis = 0;
+    if (count <= kExactFaces) Eigen::Vector3f(nodes[size_t(r.node)].e[0], nodes[size_t(r.node)].e[1], nodes[size_t(r.node)].e[2]).maxCoeff(&axis);
+    const Eigen::RowVector3d dir = R.row(axis);
+    for (int k = r.begin; k < r.end; ++k) order[size_t(k)].first = dir.dot(centroid[size_t(order[size_t(k)].second)]);
+    const int mid = r.begin + count / 2;
+    std::nth_element(order.begin() + r.begin, order.begin() + mid, order.begin() + r.end);
+    const int left = int(nodes.size());
+    nodes[size_t(r.node)].first = left;
+    nodes.emplace_back();
+    nodes.emplace_back();
+    merge.push_back(0);
+    merge.push_back(0);
+    todo.push_back({left + 1, mid, r.end});
+    todo.push_back({left, r.begin, mid});
+  }
+  // Children have higher indices than their parent: enclose the children's corners bottom-up.
+  for (int i = int(nodes.size()) - 1; i >= 0; --i) {
+    if (!merge[size_t(i)]) continue;
+    Eigen::Matrix3d R;
+    for (int k = 0; k < 9; ++k) R(k / 3, k % 3) = double(nodes[size_t(i)].R[k]);
+    const int l = nodes[size_t(i)].first;
+    set_box(nodes[size_t(i)], R, [&](const auto& f) {
+      for (int c : {l, l + 1}) {
+        const Node& ch = nodes[size_t(c)];
+        Eigen::Matrix3d Rc;
+        for (int k = 0; k < 9; ++k) Rc(k / 3, k % 3) = double(ch.R[k]);
+        // The child's box is {x : |Rc x - m| <= e}; Rc is orthonormal to 1e-7, so its corners
+        // are Rc^-1 (m ± e), enlarged by the frame error.
+        const Eigen::Matrix3d Ri = Rc.inverse();
+        for (int corner = 0; corner < 8; ++corner) {
+          Eigen::Vector3d l3;
+          for (int k = 0; k < 3; ++k)
+            l3[k] = double(ch.m[k]) + ((corner >> k) & 1 ? 1.0 : -1.0) * double(ch.e[k]) * (1 + kFrameError);
+          f(Eigen::Vector3d(Ri * l3));
+        }
+      }
+    });
+  }
+}
+
+// Ordered depth-first search: the nearer child first, a node is skipped when its box is farther
+// than the best face so far. Among faces at the same distance the lowest index wins, as in
+// closest_brute_force, so the answer is the same face whatever the tree's shape.
+int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
+  struct Entry {
+    int node;
+    double d2;
+  };
+  Entry stack[128];
+  int top = 0;
+  double best2 = std::numeric_limits<double>::infinity();
+  int face = -1;
+  // A box is pruned only when it is farther than the best face by more than the rounding slack.
+  const auto bound = [&](double b2) {
+    const double b = std::sqrt(b2) + slack;
+    return b * b * (1 + 1e-12) * (1 + kFrameError);
+  };
+  double prune2 = std::numeric_limits<double>::infinity();
+  const double px = p.x(), py = p.y(), pz = p.z();
+  stack[top++] = {0, 0.0};
+  while (top > 0) {
+    const Entry en = stack[--top];
+    if (en.d2 > prune2) continue;
+    int n = en.node;
+    for (;;) {
+      const Node& node = nodes[size_t(n)];
+      if (node.count > 0) {
+        for (int k = node.first; k < node.first + node.count; ++k) {
+          const LeafFace& T = tri[size_t(k)];
+          const double plane = T.n.dot(p) - T.offset;
+          if (plane * plane > prune2) continue;  // (prune2 already allows for rounding)
+          const double d2 = (closest_on_triangle(p, T.a, T.b, T.c).point - p).squaredNorm();
+          if (closer(d2, T.face, best2, face)) prune2 = bound(best2);
+        }
+        break;
+      }
+      const int l = node.first;
+      const double dl = nodes[size_t(l)].distance2(px, py, pz), dr = nodes[size_t(l) + 1].distance2(px, py, pz);
+      const bool left_first = dl == dr && dl == 0
+                                  ? !(nodes[size_t(l) + 1].depth(px, py, pz) < nodes[size_t(l)].depth(px, py, pz))
+                                  : !(dr < dl);
+      const int near = left_first ? l : l + 1, far = left_first ? l + 1 : l;
+      const double dn = left_first ? dl : dr, dfar = left_first ? dr : dl;
+      if (dfar <= prune2) stack[top++] = {far, dfar};
+      if (!(dn <= prune2)) break;
+      n = near;
     }
   }
-  int face() const { return face_; }
-
- private:
-  // Small open-addressing set of tested faces; when it is full, faces are simply
-  // retested (costs time, never changes the answer).
-  bool first_visit(int f) {
-    unsigned h = (unsigned(f) * 2654435761u) & (kSlots - 1);
-    for (int probe = 0; probe < 16; ++probe, h = (h + 1) & (kSlots - 1)) {
-      if (seen_[h] == f) return false;
-      if (seen_[h] < 0) {
-        seen_[h] = f;
-        return true;
-      }
-    }
-    return true;
-  }
-  static constexpr unsigned kSlots = 256;
-  const SurfaceIndex::Impl& s_;
-  Eigen::Vector3d p_;
-  std::array<int, kSlots> seen_;
-  double best_ = std::numeric_limits<double>::infinity();
-  double best2_ = std::numeric_limits<double>::infinity();
-  double radius2_ = std::numeric_limits<double>::max();
-  int face_ = -1;
-};
-
-}  // namespace
+  return face;
+}
 
 SurfaceIndex::SurfaceIndex(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
   Impl& s = *impl_;
   s.mesh = std::move(mesh);
   s.normals = vertex_normals(s.mesh);
   s.topology = mesh_topology(s.mesh);
-  const int nv = int(s.mesh.vertices.size());
-  s.vf_start.assign(nv + 1, 0);
-  for (const auto& f : s.mesh.faces)
-    for (int v : f) ++s.vf_start[v + 1];
-  for (int v = 0; v < nv; ++v) s.vf_start[v + 1] += s.vf_start[v];
-  s.vf_faces.resize(s.vf_start[nv]);
-  std::vector<int> fill(s.vf_start.begin(), s.vf_start.end() - 1);
-  s.reach.assign(nv, 0.0);
-  for (int f = 0; f < int(s.mesh.faces.size()); ++f) {
-    const auto& F = s.mesh.faces[f];
-    const auto &a = s.mesh.vertices[F[0]], &b = s.mesh.vertices[F[1]], &c = s.mesh.vertices[F[2]];
-    s.cover = std::max(s.cover, covering_radius_of(a, b, c));
-    for (int k = 0; k < 3; ++k) {
-      s.vf_faces[fill[F[k]]++] = f;
-      for (int j = 0; j < 3; ++j)
-        s.reach[F[k]] = std::max(s.reach[F[k]], (s.mesh.vertices[F[j]] - s.mesh.vertices[F[k]]).norm());
-    }
-  }
-  s.cover *= 1 + 1e-9;  // rounding of the covering radius must never shrink the search
-  flann::Matrix<double> data(const_cast<double*>(s.mesh.vertices[0].data()), size_t(nv), 3);
-  s.tree = std::make_unique<KdTree>(data, flann::KDTreeSingleIndexParams(16, true));
-  s.tree->buildIndex();
+  for (const auto& F : s.mesh.faces)
+    s.cover = std::max(s.cover, covering_radius_of(s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])],
+                                                   s.mesh.vertices[size_t(F[2])]));
+  if (!s.mesh.faces.empty()) s.build();
 }
 
 SurfaceIndex::~SurfaceIndex() = default;
@@ -181,9 +370,9 @@ SurfaceIndex::SurfaceIndex(SurfaceIndex&&) noexcept = default;
 SurfaceIndex& SurfaceIndex::operator=(SurfaceIndex&&) noexcept = default;
 
 Footpoint SurfaceIndex::closest(const Eigen::Vector3d& p) const {
-  NearestFaceVisitor visitor(*impl_, p);
-  impl_->tree->findNeighbors(visitor, p.data(), flann::SearchParams(flann::FLANN_CHECKS_UNLIMITED, 0.0f));
-  return impl_->make_footpoint(p, visitor.face());
+  const int face = p.allFinite() ? impl_->search(p) : -1;
+  if (face < 0) return no_footpoint();
+  return impl_->make_footpoint(p, face);
 }
 
 std::vector<Footpoint> SurfaceIndex::closest(const std::vector<Eigen::Vector3d>& points) const {
@@ -195,15 +384,12 @@ std::vector<Footpoint> SurfaceIndex::closest(const std::vector<Eigen::Vector3d>&
 }
 
 Footpoint SurfaceIndex::closest_brute_force(const Eigen::Vector3d& p) const {
-  double best = std::numeric_limits<double>::infinity();
+  if (!p.allFinite()) return no_footpoint();
+  double best2 = std::numeric_limits<double>::infinity();
   int face = -1;
-  for (int f = 0; f < int(impl_->mesh.faces.size()); ++f) {
-    const double d2 = impl_->face_distance2(f, p);
-    if (d2 < best) {
-      best = d2;
-      face = f;
-    }
-  }
+  for (int f = 0; f < int(impl_->mesh.faces.size()); ++f)
+    closer(impl_->face_distance2(f, p), f, best2, face);
+  if (face < 0) return no_footpoint();
   return impl_->make_footpoint(p, face);
 }
 

@@ -1,7 +1,8 @@
-// Exact closest points on a triangle mesh. FLANN's exact kd-tree over the vertices
-// drives the search; candidate triangles are those with a vertex within
-// (best distance so far + largest covering radius of a triangle), which provably
-// contains the triangle of the true closest point, so the answer equals brute force.
+// Exact closest points on a triangle mesh: a bounding-volume hierarchy of the faces with an
+// oriented box per node (principal axes, so boxes are thin along the surface normal), searched
+// nearer child first and pruned by the squared box distance. The cost per query grows like
+// log n at any distance from the surface; the answer equals brute force, face included (ties
+// go to the lower face index), whatever the thread count.
 #pragma once
 #include <Eigen/Core>
 #include <array>
@@ -36,10 +37,13 @@ class SurfaceIndex {
   SurfaceIndex(SurfaceIndex&&) noexcept;
   SurfaceIndex& operator=(SurfaceIndex&&) noexcept;
 
+  // A query that is not finite (NaN or infinite coordinates, e.g. from an overflowing input) has
+  // no footpoint: face -1, distance +inf, NaN point and normal, on_boundary true (so callers that
+  // leave out samples beyond Φ's rim leave it out too). Never throws.
   [[nodiscard]] Footpoint closest(const Eigen::Vector3d& p) const;
   // Both cores; result i belongs to points[i].
   [[nodiscard]] std::vector<Footpoint> closest(const std::vector<Eigen::Vector3d>& points) const;
-  // Brute force over all triangles; the reference the tests compare against.
+  // Brute force over all triangles; the reference the tests compare against (same tie rule).
   [[nodiscard]] Footpoint closest_brute_force(const Eigen::Vector3d& p) const;
 
   [[nodiscard]] const TriMesh& mesh() const;

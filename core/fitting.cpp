@@ -9,8 +9,22 @@
 #include <optional>
 
 #include "core/errors.h"
+#include "core/fitting_residuals.h"
 
 namespace flankcam {
+
+using fit_residuals::LinearResidual;
+using fit_residuals::RigidResidual;
+using fit_residuals::SampleResidual;
+
+const char* to_string(FitStatus s) {
+  switch (s) {
+    case FitStatus::Converged: return "converged";
+    case FitStatus::IterationLimit: return "iteration limit";
+    case FitStatus::SolverFailed: return "solver failed";
+  }
+  return "?";
+}
 
 const char* to_string(ToolShape s) {
   switch (s) {
@@ -41,6 +55,7 @@ std::string FitOptions::validate() const {
   if (max_iterations < 1) return "max_iterations: at least 1";
   if (solver_iterations < 1) return "solver_iterations: at least 1";
   if (!(stall >= 0)) return "stall: must be >= 0";
+  if (!(motion_tolerance >= 0) || !std::isfinite(motion_tolerance)) return "motion_tolerance: must be finite and >= 0";
   if (!(robust_scale >= 0) || !std::isfinite(robust_scale)) return "robust_scale: must be finite and >= 0";
   if (threads < 1) return "threads: at least 1";
   return {};
@@ -76,103 +91,6 @@ BSpline spline_through(std::vector<Eigen::Vector3d> poly, const std::vector<doub
   }
   return fit_rail(poly, ts, int(poly.size()));
 }
-
-// r = sum_b J_b x_b - c: the plane, point and fairness residuals are linear in the
-// unknowns once footpoints and normals are fixed (they are recomputed between solves).
-class LinearResidual final : public ceres::CostFunction {
- public:
-  LinearResidual(std::vector<Eigen::MatrixXd> J, Eigen::VectorXd c) : J_(std::move(J)), c_(std::move(c)) {
-    set_num_residuals(int(c_.size()));
-    for (const auto& j : J_) mutable_parameter_block_sizes()->push_back(int(j.cols()));
-  }
-  bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
-    const Eigen::Index n = c_.size();
-    Eigen::Map<Eigen::VectorXd> r(residuals, n);
-    r = -c_;
-    for (size_t b = 0; b < J_.size(); ++b) {
-      r += J_[b] * Eigen::Map<const Eigen::VectorXd>(x[b], J_[b].cols());
-      if (jacobians && jacobians[b])
-        Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(jacobians[b], n,
-                                                                                            J_[b].cols()) = J_[b];
-    }
-    return true;
-  }
-
- private:
-  std::vector<Eigen::MatrixXd> J_;
-  Eigen::VectorXd c_;
-};
-
-// One sample p_ij = (1-s) a(t_i) + s b(t_i) with its fixed footpoint q and unit normal n:
-//   F_plane, eq. (10): w_plane (<p - q, n> - d_j)            (1 residual)
-//   F_point, eq. (10): w_point (p - (q + d_j n))              (3 residuals)
-// with a(t_i) = sum_k w_k A_k, b(t_i) = sum_k w_k B_k and d_j = sum_k c_k D_k.
-class SampleResidual final : public ceres::CostFunction {
- public:
-  SampleResidual(const BasisRow& row, double s, const Eigen::Vector3d& q, const Eigen::Vector3d& n,
-                 const std::vector<double>& c, double w_plane, double w_point)
-      : row_(row), s_(s), q_(q), n_(n), c_(c), w_plane_(w_plane), w_point_(w_point) {
-    set_num_residuals(4);
-    for (int k = 0; k < 8; ++k) mutable_parameter_block_sizes()->push_back(3);
-    mutable_parameter_block_sizes()->push_back(int(c_.size()));
-  }
-  bool Evaluate(double const* const* x, double* r, double** J) const override {
-    Eigen::Vector3d p = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 4; ++k)
-      p += row_.w[k] * ((1 - s_) * Eigen::Map<const Eigen::Vector3d>(x[k]) + s_ * Eigen::Map<const Eigen::Vector3d>(x[4 + k]));
-    double d = 0;
-    for (size_t k = 0; k < c_.size(); ++k) d += c_[k] * x[8][k];
-    r[0] = w_plane_ * ((p - q_).dot(n_) - d);
-    Eigen::Map<Eigen::Vector3d>{r + 1} = w_point_ * (p - q_ - d * n_);
-    if (!J) return true;
-    for (int k = 0; k < 8; ++k) {
-      if (!J[k]) continue;
-      const double f = row_.w[k % 4] * (k < 4 ? 1 - s_ : s_);
-      Eigen::Map<Eigen::Matrix<double, 4, 3, Eigen::RowMajor>> Jk(J[k]);
-      Jk.row(0) = w_plane_ * f * n_.transpose();
-      Jk.bottomRows<3>() = w_point_ * f * Eigen::Matrix3d::Identity();
-    }
-    if (J[8]) {
-      const int K = int(c_.size());
-      Eigen::Map<Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> Jd(J[8], 4, K);
-      for (int k = 0; k < K; ++k) {
-        Jd(0, k) = -w_plane_ * c_[size_t(k)];
-        Jd.block<3, 1>(1, k) = -w_point_ * c_[size_t(k)] * n_;
-      }
-    }
-    return true;
-  }
-
- private:
-  BasisRow row_;
-  double s_;
-  Eigen::Vector3d q_, n_;
-  std::vector<double> c_;
-  double w_plane_, w_point_;
-};
-
-// Rigidity, eq. (9) as a soft constraint: r = w (|a(t_i) - b(t_i)|^2 - L^2),
-// a(t_i) = sum_k w_k A_k, b(t_i) = sum_k w_k B_k over the four active control points.
-class RigidResidual final : public ceres::SizedCostFunction<1, 3, 3, 3, 3, 3, 3, 3, 3> {
- public:
-  RigidResidual(const BasisRow& row, double L, double weight) : row_(row), L2_(L * L), w_(weight) {}
-  bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
-    Eigen::Vector3d u = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 4; ++k)
-      u += row_.w[k] * (Eigen::Map<const Eigen::Vector3d>(x[k]) - Eigen::Map<const Eigen::Vector3d>(x[4 + k]));
-    residuals[0] = w_ * (u.squaredNorm() - L2_);
-    if (jacobians)
-      for (int k = 0; k < 4; ++k) {
-        if (jacobians[k]) Eigen::Map<Eigen::RowVector3d>{jacobians[k]} = 2 * w_ * row_.w[k] * u.transpose();
-        if (jacobians[4 + k]) Eigen::Map<Eigen::RowVector3d>{jacobians[4 + k]} = -2 * w_ * row_.w[k] * u.transpose();
-      }
-    return true;
-  }
-
- private:
-  BasisRow row_;
-  double L2_, w_;
-};
 
 // Footpoints of the m x n samples R(t_i, s_j), row-major in i.
 std::vector<Footpoint> sample_footpoints(const SurfaceIndex& surface, const Rails& rails, int m, int n) {
@@ -429,6 +347,11 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     std::vector<double> D = result.tool.D;
     const auto fps = sample_footpoints(surface, result.rails, m, n);
 
+    struct SamplePlane {
+      int i, j;
+      Eigen::Vector3d n;
+    };
+    std::vector<SamplePlane> planes;  // the samples in this round's objective
     ceres::Problem::Options po;
     po.loss_function_ownership = ceres::DO_NOT_TAKE_OWNERSHIP;
     ceres::Problem problem(po);
@@ -448,6 +371,7 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
         const auto plane = sample_plane(p, f);
         if (!plane) continue;  // the axis point is beyond Φ's boundary: no data there
         const Eigen::Vector3d nrm = *plane;
+        planes.push_back({i, j, nrm});
         problem.AddResidualBlock(new SampleResidual(row, s, f.point, nrm, tool_basis[size_t(j)], w_plane, w_point),
                                  loss, blocks);
       }
@@ -494,32 +418,63 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
       problem.AddResidualBlock(new LinearResidual({C}, target), nullptr, D.data());
     }
     ceres::Solver::Options so;
-    so.linear_solver_type = ceres::DENSE_NORMAL_CHOLESKY;
+    // Each sample touches 8 of the 2 x rail_control_points control points and the radii: J^T J is
+    // sparse (about a third of the dense matrix is non-zero at 16 control points), and the sparse
+    // normal Cholesky is faster than the dense one (bench/fit_bench).
+    so.linear_solver_type = ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::SUITE_SPARSE) ||
+                                    ceres::IsSparseLinearAlgebraLibraryTypeAvailable(ceres::EIGEN_SPARSE)
+                                ? ceres::SPARSE_NORMAL_CHOLESKY
+                                : ceres::DENSE_NORMAL_CHOLESKY;
     so.max_num_iterations = o.solver_iterations;
-    // One thread: Ceres sums cost and gradient per thread, so the result would depend on the thread
-    // count in the last digits (issue 12). The footpoint queries around the solve use OpenMP.
+    // One thread: Ceres sums cost and gradient per thread in a varying order, so the result would
+    // depend on the thread count in the last digits (issue 12). The closest points, most of a fit's
+    // time, run on OpenMP threads around the solve.
     so.num_threads = 1;
     so.logging_type = ceres::SILENT;
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);
+    // NO_CONVERGENCE only means the round used its solver_iterations; FAILURE (or a cost that is
+    // not finite) is a result, not an exception: the last good motion is kept and reported.
+    if (fit_residuals::solve_failed(summary)) {
+      result.status = FitStatus::SolverFailed;
+      result.message = "Ceres: " + summary.message;
+      break;
+    }
 
+    // How far the envelope moved in this round: the largest displacement along a sample's plane
+    // normal of the axis point minus the change of its radius (unit frame). A drift of the axis
+    // along the normal with an equal change of the radii (nearly free on developable surfaces,
+    // see w_anchor) does not move the envelope and does not count.
+    Rails next = result.rails;
     for (int k = 0; k < Nc; ++k)
       for (int c = 0; c < 3; ++c) {
-        result.rails.a.ctrl(k, c) = A[size_t(3 * k + c)];
-        result.rails.b.ctrl(k, c) = B[size_t(3 * k + c)];
+        next.a.ctrl(k, c) = A[size_t(3 * k + c)];
+        next.b.ctrl(k, c) = B[size_t(3 * k + c)];
       }
-    result.tool.D = D;
+    ToolRadius next_tool = result.tool;
+    next_tool.D = D;
+    double moved = 0;
+    for (const SamplePlane& sp : planes) {
+      const double t = double(sp.i) / (m - 1), s = double(sp.j) / (n - 1);
+      moved = std::max(moved, std::abs((next.point(t, s) - result.rails.point(t, s)).dot(sp.n) -
+                                       (next_tool.d(s) - result.tool.d(s))));
+    }
+    result.rails = std::move(next);
+    result.tool = std::move(next_tool);
     const double objective = 2 * summary.final_cost;  // F_motion, eq. (12)
     result.objective.push_back(objective);
     result.iterations = iter + 1;
     if (o.on_iteration) o.on_iteration(result.iterations, objective);
-    // The footpoints (and which samples lie beyond Φ) change between solves, so progress is
-    // judged within a solve: converged when one round cannot lower its own objective.
-    if (objective <= 0 || summary.initial_cost - summary.final_cost < o.stall * summary.initial_cost) {
-      result.converged = true;
+    // Converged when the motion and the radii stop moving, or when a round cannot lower its own
+    // objective (the footpoints, and which samples lie beyond Φ, change between solves, so
+    // progress is judged within a solve).
+    if (objective <= 0 || moved <= o.motion_tolerance ||
+        summary.initial_cost - summary.final_cost < o.stall * summary.initial_cost) {
+      result.status = FitStatus::Converged;
       break;
     }
   }
+  result.converged = result.status == FitStatus::Converged;
   result.eps_opt = sample_error(surface, result.rails, result.tool, o);
   return result;
 }

@@ -35,6 +35,10 @@ struct FitOptions {
   int max_iterations = 25;           // outer iterations (footpoints recomputed between solves)
   int solver_iterations = 5;         // Levenberg-Marquardt iterations per outer iteration
   double stall = 2e-2;               // stop when a round lowers its objective by less than this, relatively
+  // or when a round moves the envelope by less than this at every sample (unit frame). 1e-6 stops the
+  // exact-envelope tests 2-12 rounds earlier but raises their ε by up to 15%, so the default only
+  // stops a fit that has really stalled.
+  double motion_tolerance = 1e-7;
   // Scale of a Cauchy loss on the sample residuals (unit frame; not in the paper). Samples whose
   // distance error is well above it (a local bump, a damaged scan) stop pulling the motion, so the
   // fit stays on the rest. The price is a larger worst error where the surface is simply not an
@@ -99,13 +103,22 @@ struct ErrorStats {
 // envelope of the circles (z, d(z)); unit frame.
 [[nodiscard]] std::vector<Eigen::Vector2d> meridian(const ToolRadius& tool, double length, int points = 61);
 
+enum class FitStatus {
+  Converged,       // the motion and radii stopped moving, or a round could not lower F_motion
+  IterationLimit,  // max_iterations outer rounds ran
+  SolverFailed,    // Ceres reported FAILURE (or a cost that is not finite); the last good motion is kept
+};
+[[nodiscard]] const char* to_string(FitStatus s);
+
 struct FitResult {
   Rails rails;
   ToolRadius tool;
   ErrorStats eps_ini, eps_opt;
   int iterations = 0;
   std::vector<double> objective;  // F_motion, eq. (12), after each outer iteration
-  bool converged = false;
+  bool converged = false;  // status == Converged
+  FitStatus status = FitStatus::IterationLimit;
+  std::string message;  // why the solver failed (SolverFailed), else empty
 };
 // Joint optimisation of the rails and the radii (eqs. 8-12) from an initial motion.
 [[nodiscard]] FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, const FitOptions& options);

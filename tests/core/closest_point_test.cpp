@@ -2,6 +2,8 @@
 
 #include <doctest/doctest.h>
 
+#include <cmath>
+#include <limits>
 #include <random>
 
 #include "core/envelope.h"
@@ -11,16 +13,18 @@ using namespace flankcam;
 
 namespace {
 
-// Same footpoint as brute force: distance to rounding, same point (ties may pick another face).
+// Same footpoint as brute force, bit for bit: same face (ties go to the lower index in both),
+// hence the same point, distance and normal.
 void check_matches_brute_force(const SurfaceIndex& index, const std::vector<Eigen::Vector3d>& queries) {
   int mismatches = 0;
   for (const auto& q : queries) {
     const Footpoint fast = index.closest(q), slow = index.closest_brute_force(q);
-    const bool same = std::abs(fast.distance - slow.distance) <= 1e-12 * (1 + slow.distance) &&
-                      (fast.point - slow.point).norm() <= 1e-9 * (1 + slow.distance);
+    const bool same = fast.face == slow.face && fast.distance == slow.distance && fast.point == slow.point &&
+                      fast.normal == slow.normal && fast.on_boundary == slow.on_boundary;
     if (!same) {
       ++mismatches;
       CAPTURE(q.transpose());
+      CHECK(fast.face == slow.face);
       CHECK(fast.distance == doctest::Approx(slow.distance));
     }
   }
@@ -115,4 +119,71 @@ TEST_CASE("closest points equal brute force on an exact envelope") {
   const EnvelopeGrid g = envelope_grid(analytic_motion(o), cone_profile(5, 8), 20, 50, 1);
   const SurfaceIndex index(g.mesh);
   check_matches_brute_force(index, random_points(index.mesh(), 15, 1000, 12));
+}
+
+namespace {
+// Points at a given distance from random points of random faces, along the face normal, both sides.
+std::vector<Eigen::Vector3d> offset_points(const TriMesh& m, double offset, int count, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_int_distribution<int> face(0, int(m.faces.size()) - 1);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Eigen::Vector3d> out;
+  for (int i = 0; i < count; ++i) {
+    const int f = face(rng);
+    const auto& F = m.faces[size_t(f)];
+    double b1 = u(rng), b2 = u(rng);
+    if (b1 + b2 > 1) b1 = 1 - b1, b2 = 1 - b2;
+    const Eigen::Vector3d &a = m.vertices[size_t(F[0])], &b = m.vertices[size_t(F[1])], &c = m.vertices[size_t(F[2])];
+    out.push_back(a + b1 * (b - a) + b2 * (c - a) + (u(rng) < 0.5 ? -offset : offset) * face_normal(m, f));
+  }
+  return out;
+}
+}  // namespace
+
+TEST_CASE("closest points equal brute force on a 13k-face envelope at the distances a fit queries") {
+  // Big enough for the hierarchy's upper nodes (which enclose their children's boxes) to matter.
+  const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), 40, 170, 1);
+  const TriMesh mesh = transformed(g.mesh, unit_diagonal_frame(g.mesh));
+  REQUIRE(mesh.faces.size() > 12000);
+  const SurfaceIndex index(mesh);
+  for (double offset : {0.0, 1e-9, 0.01, 0.05, 0.3}) {
+    CAPTURE(offset);
+    check_matches_brute_force(index, offset_points(mesh, offset, 150, 21));
+  }
+  // Queries exactly at vertices and edge midpoints: many faces at distance 0, the lowest index wins.
+  std::vector<Eigen::Vector3d> shared;
+  for (size_t f = 0; f < mesh.faces.size(); f += 97) {
+    const auto& F = mesh.faces[f];
+    shared.push_back(mesh.vertices[size_t(F[0])]);
+    shared.push_back(0.5 * (mesh.vertices[size_t(F[1])] + mesh.vertices[size_t(F[2])]));
+  }
+  check_matches_brute_force(index, shared);
+}
+
+TEST_CASE("a query that is not finite has no footpoint and does not crash (issue 12, item 1)") {
+  const SurfaceIndex index(test::wavy_grid(20, 20, 100, 100, 3));
+  const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
+  for (const Eigen::Vector3d& q : {Eigen::Vector3d(nan, 0, 0), Eigen::Vector3d(0, inf, 0), Eigen::Vector3d(-inf, 1, nan)}) {
+    CAPTURE(q.transpose());
+    for (const Footpoint& f : {index.closest(q), index.closest_brute_force(q), index.closest(std::vector<Eigen::Vector3d>{q})[0]}) {
+      CHECK(f.face == -1);
+      CHECK(f.distance == inf);
+      CHECK(f.on_boundary);
+      CHECK(std::isnan(f.point.x()));
+    }
+  }
+  // Finite but so far away that squared distances overflow: still the same face as brute force.
+  const std::vector<Eigen::Vector3d> far = {{1e308, 0, 0}, {-1e308, 1e308, 5}, {1e200, 1e200, 1e200}};
+  for (const auto& q : far) {
+    CAPTURE(q.transpose());
+    const Footpoint f = index.closest(q), slow = index.closest_brute_force(q);
+    CHECK(f.face >= 0);
+    CHECK(f.face == slow.face);
+    CHECK(f.face < int(index.mesh().faces.size()));
+  }
+  // A batch mixing good and bad points answers each on its own.
+  const auto batch = index.closest(std::vector<Eigen::Vector3d>{{50, 50, 10}, {nan, nan, nan}, {10, 20, -4}});
+  CHECK(batch[0].face >= 0);
+  CHECK(batch[1].face == -1);
+  CHECK(batch[2].face == index.closest_brute_force({10, 20, -4}).face);
 }

@@ -1,11 +1,24 @@
 #include "core/fitting.h"
 
+// Ceres brings glog, whose CHECK macros would silently replace doctest's: include it first and
+// drop them before doctest defines its own.
+#include "core/fitting_residuals.h"
+#undef CHECK
+#undef CHECK_EQ
+#undef CHECK_NE
+#undef CHECK_LT
+#undef CHECK_LE
+#undef CHECK_GT
+#undef CHECK_GE
+
 #include <doctest/doctest.h>
 
 #include <Eigen/Geometry>
 #include <functional>
+#include <limits>
 #include <random>
 
+#include "core/errors.h"
 #include "core/machined_surface.h"
 #include "tests/test_util.h"
 
@@ -64,7 +77,7 @@ TEST_CASE("surface-driven fits of exact envelopes reach eps <= 1e-4 for every to
     o.shape = c.shape;
     const FitResult r = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
     MESSAGE((std::string(c.motion) + " " + c.profile_name) << ": eps_ini " << r.eps_ini.max << " eps_opt " << r.eps_opt.max
-                     << " profile error " << profile_error_mm(r, ex, c.profile) << " mm");
+                     << " profile error " << profile_error_mm(r, ex, c.profile) << " mm, " << r.iterations << " iterations, " << std::string(to_string(r.status)));
     CHECK(r.eps_ini.max > 1e-3);
     CHECK(r.eps_opt.max <= 1e-4);
     CHECK(r.eps_opt.samples > 2000);
@@ -87,7 +100,7 @@ TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4") {
     o.shape = c.shape;
     const FitResult r = optimize_motion(surface, rails_from_trajectory(tr, o), o);
     MESSAGE((std::string(c.motion) + " " + c.profile_name) << ": " << tr.a.size() << " positions, eps_ini " << r.eps_ini.max
-                     << " eps_opt " << r.eps_opt.max << " profile error " << profile_error_mm(r, ex, c.profile) << " mm");
+                     << " eps_opt " << r.eps_opt.max << " profile error " << profile_error_mm(r, ex, c.profile) << " mm, " << r.iterations << " iterations, " << std::string(to_string(r.status)));
     CHECK(r.eps_opt.max <= 1e-4);
   });
 }
@@ -212,4 +225,126 @@ TEST_CASE("a local bump on the design surface: the fit stays on the undisturbed 
   CHECK(robust.cov_bumped < robust.cov_clean - 0.03);
   // Plain least squares (the paper, the default) is pulled towards the bump everywhere.
   CHECK(least_squares.worst_outside > 5 * robust.worst_outside);
+}
+
+namespace {
+// Worst relative difference between a cost function's Jacobians and central differences of its
+// residuals at x (each block's columns; relative to the larger of the two and 1e-3 of the scale).
+double jacobian_error(const ceres::CostFunction& f, std::vector<std::vector<double>> x) {
+  const int nr = f.num_residuals();
+  const auto& sizes = f.parameter_block_sizes();
+  std::vector<const double*> xp;
+  for (const auto& b : x) xp.push_back(b.data());
+  std::vector<std::vector<double>> J;
+  std::vector<double*> Jp;
+  for (int s : sizes) J.emplace_back(size_t(nr * s)), Jp.push_back(J.back().data());
+  std::vector<double> r(static_cast<size_t>(nr)), rp(static_cast<size_t>(nr)), rm(static_cast<size_t>(nr));
+  REQUIRE(f.Evaluate(xp.data(), r.data(), Jp.data()));
+  double worst = 0, scale = 0;
+  for (const auto& Jb : J)
+    for (double v : Jb) scale = std::max(scale, std::abs(v));
+  for (size_t b = 0; b < x.size(); ++b)
+    for (int c = 0; c < sizes[b]; ++c) {
+      const double x0 = x[b][size_t(c)], h = 1e-6 * (1 + std::abs(x0));
+      x[b][size_t(c)] = x0 + h;
+      REQUIRE(f.Evaluate(xp.data(), rp.data(), nullptr));
+      x[b][size_t(c)] = x0 - h;
+      REQUIRE(f.Evaluate(xp.data(), rm.data(), nullptr));
+      x[b][size_t(c)] = x0;
+      for (int i = 0; i < nr; ++i) {
+        const double numeric = (rp[size_t(i)] - rm[size_t(i)]) / (2 * h), analytic = J[b][size_t(i * sizes[b] + c)];
+        worst = std::max(worst, std::abs(numeric - analytic) / std::max({std::abs(numeric), std::abs(analytic), 1e-3 * scale}));
+      }
+    }
+  return worst;
+}
+}  // namespace
+
+TEST_CASE("the hand-written Jacobians of the fit residuals agree with central differences at random points") {
+  std::mt19937 rng(17);
+  std::uniform_real_distribution<double> u(-1, 1), pos(0, 1);
+  const auto random_block = [&](int n) {
+    std::vector<double> b(static_cast<size_t>(n));
+    for (auto& v : b) v = u(rng);
+    return b;
+  };
+  for (int trial = 0; trial < 20; ++trial) {
+    CAPTURE(trial);
+    const BasisRow row = bspline_basis(16, pos(rng));
+    const int K = trial % 3 == 0 ? 10 : trial % 3 == 1 ? 2 : 1;  // general, cone, cylinder radii
+    std::vector<double> c(static_cast<size_t>(K));
+    for (auto& v : c) v = pos(rng);
+    const Eigen::Vector3d q(u(rng), u(rng), u(rng)), n = Eigen::Vector3d(u(rng), u(rng), u(rng)).normalized();
+    std::vector<std::vector<double>> x;
+    for (int k = 0; k < 8; ++k) x.push_back(random_block(3));
+    const fit_residuals::RigidResidual rigid(row, 0.3 + pos(rng), 0.7);
+    CHECK(jacobian_error(rigid, x) < 1e-6);
+    x.push_back(random_block(K));
+    const fit_residuals::SampleResidual sample(row, pos(rng), q, n, c, 0.02, 0.001);
+    CHECK(jacobian_error(sample, x) < 1e-6);
+    const fit_residuals::LinearResidual linear({Eigen::MatrixXd::Random(3, 3), Eigen::MatrixXd::Random(3, K)},
+                                               Eigen::VectorXd::Random(3));
+    CHECK(jacobian_error(linear, {random_block(3), random_block(K)}) < 1e-6);
+  }
+}
+
+TEST_CASE("a fit reports its status: converged, iteration limit, or a solver failure") {
+  const Exact ex = exact_envelope("arc", cone_profile(6, 9));
+  const SurfaceIndex surface(ex.unit_mesh);
+  std::vector<AxisLine> lines;
+  for (double t : {0.0, 0.5, 1.0}) lines.push_back({ex.frame.to_unit(ex.motion.a(t)), ex.frame.to_unit(ex.motion.b(t))});
+  FitOptions o;
+  o.shape = ToolShape::Cone;
+  o.max_iterations = 1;
+  o.stall = 0;
+  o.motion_tolerance = 0;
+  const FitResult capped = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
+  CHECK(capped.status == FitStatus::IterationLimit);
+  CHECK_FALSE(capped.converged);
+  CHECK(capped.iterations == 1);
+  o.max_iterations = 25;
+  o.stall = 2e-2;
+  const FitResult done = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
+  CHECK(done.status == FitStatus::Converged);
+  CHECK(done.converged);
+  CHECK(done.message.empty());
+  // What counts as a failed solve (then the fit stops, keeps the last good motion and says why).
+  ceres::Solver::Summary summary;
+  summary.initial_cost = 1, summary.final_cost = 0.5;
+  for (auto [type, failed] : std::vector<std::pair<ceres::TerminationType, bool>>{
+           {ceres::CONVERGENCE, false}, {ceres::NO_CONVERGENCE, false}, {ceres::FAILURE, true}, {ceres::USER_FAILURE, true}}) {
+    summary.termination_type = type;
+    CHECK(fit_residuals::solve_failed(summary) == failed);
+  }
+  summary.termination_type = ceres::CONVERGENCE;
+  summary.final_cost = std::numeric_limits<double>::quiet_NaN();
+  CHECK(fit_residuals::solve_failed(summary));
+}
+
+TEST_CASE("line-driven initialisation from a line with a 1e308 coordinate ends in an InputError, not a crash") {
+  // Issue 12, item 1: the closest-point search read faces[-1] for such points.
+  const Exact ex = exact_envelope("arc", cone_profile(6, 9));
+  const SurfaceIndex surface(ex.unit_mesh);
+  const Eigen::Vector3d a(1e308, 0.1, 0.2), b(0.0, 0.1, 0.3);
+  const ExploredLine best = explore_line(surface, a, b);
+  const LineTrajectory tr = propagate_line(surface, best.a, best.b);
+  CHECK_THROWS_AS((void)rails_from_trajectory(tr, FitOptions{}), InputError);
+}
+
+TEST_CASE("a fit gives the same rails, radii and errors on 1 and 2 threads") {
+  const Exact ex = exact_envelope("twist", barrel_profile(6, 1.5));
+  const SurfaceIndex surface(ex.unit_mesh);
+  std::vector<AxisLine> lines;
+  for (double t : {0.0, 0.5, 1.0}) lines.push_back({ex.frame.to_unit(ex.motion.a(t)), ex.frame.to_unit(ex.motion.b(t))});
+  FitOptions o;
+  o.max_iterations = 4;
+  o.threads = 1;
+  const FitResult one = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
+  o.threads = 2;
+  const FitResult two = optimize_motion(surface, rails_from_lines(lines, 0, 0, o), o);
+  CHECK(one.rails.a.ctrl == two.rails.a.ctrl);
+  CHECK(one.rails.b.ctrl == two.rails.b.ctrl);
+  CHECK(one.tool.D == two.tool.D);
+  CHECK(one.eps_opt.max == two.eps_opt.max);
+  CHECK(one.objective == two.objective);
 }
