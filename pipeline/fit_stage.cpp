@@ -154,6 +154,8 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
                          "{:.1f} s + {:.1f} s",
                          p.name, r.eps_ini.max, r.eps_opt.max, out.frame.length_to_mm(r.eps_opt.max),
                          100 * fp.fit.coverage, job.tolerance_mm, fp.fit.seconds_init, fp.fit.seconds_opt));
+    if (r.status == FitStatus::SolverFailed)
+      progress(fmt::format("patch {}: the least-squares solver failed ({}); the last good motion is kept", p.name, r.message));
     out.patches.push_back(std::move(fp));
   }
   check_job(job, out, progress);
@@ -247,6 +249,8 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
                                    "shank/holder: closer than the clearance when <= 0"}};
   j["iterations"] = r.iterations;
   j["converged"] = r.converged;
+  j["status"] = to_string(r.status);  // converged, iteration limit, or the solver failed
+  if (!r.message.empty()) j["solver_message"] = r.message;
   if (p.fit.explored) {
     j["exploration"] = {{"F_user_line", p.fit.explored->F_start},
                         {"F_explored", p.fit.explored->movability.F},
