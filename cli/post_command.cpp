@@ -66,7 +66,7 @@ Run add_post_command(CLI::App& app) {
   cmd->add_option("apt", args->apt, "APT CL-data files (one program each, plus one for all in order)")->required();
   cmd->add_option("--machine", args->machine, "machine file, or the name of one in machines/")->required();
   cmd->add_option("--out", args->out, "output directory")->required();
-  cmd->add_option("--dialect", args->dialect, "iso, fanuc, linuxcnc, heidenhain or sinumerik (default: the machine's)");
+  cmd->add_option("--dialect", args->dialect, dialect_names() + " (default: the machine's)");
   cmd->add_option("--tool-length", args->tool_length_mm, "spindle nose to tool tip, mm (machines that turn the head)");
   cmd->add_option("--tolerance", args->tolerance_mm, "linearisation tolerance at the tip, mm")
       ->capture_default_str()->check(CLI::PositiveNumber);

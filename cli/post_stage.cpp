@@ -12,10 +12,15 @@ namespace flankcam::cli {
 Machine find_machine(const std::string& name_or_path, const std::filesystem::path& relative_to) {
   namespace fs = std::filesystem;
   const fs::path given(name_or_path);
+  const auto load = [](const fs::path& p) {  // the dialect is postproc's to check
+    Machine m = load_machine(p.string());
+    (void)machine_dialect(m);
+    return m;
+  };
   for (const fs::path& p : {given, relative_to / given})
-    if (!p.empty() && fs::is_regular_file(p)) return load_machine(p.string());
+    if (!p.empty() && fs::is_regular_file(p)) return load(p);
   const fs::path shipped = fs::path(FLANKCAM_MACHINES_DIR) / (name_or_path + ".yaml");
-  if (fs::is_regular_file(shipped)) return load_machine(shipped.string());
+  if (fs::is_regular_file(shipped)) return load(shipped);
   std::vector<std::string> names;
   for (const auto& e : fs::directory_iterator(FLANKCAM_MACHINES_DIR))
     if (e.path().extension() == ".yaml") names.push_back(e.path().stem().string());
@@ -54,7 +59,7 @@ std::vector<WrittenProgram> write_programs(const std::filesystem::path& out, con
                                            const std::vector<PostInput>& inputs, const std::string& all_name,
                                            const PostSettings& settings, const std::vector<std::string>& header) {
   std::vector<Dialect> dialects = settings.dialects;
-  if (dialects.empty()) dialects.push_back(parse_dialect(m.controller.dialect));
+  if (dialects.empty()) dialects.push_back(machine_dialect(m));
   // Build every program before writing any, so an unreachable patch leaves no files behind.
   struct Pending {
     std::string file, patch;
