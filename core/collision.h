@@ -46,7 +46,7 @@ struct CollisionOptions {
   // positions x samples. Beyond a bound check_collisions throws InputError saying what to change
   // instead of running for hours (a 50 m part); within them a check takes at most minutes.
   int max_positions = 1000000;   // 48 MB of poses
-  double max_work = 2e8;         // positions x samples (the shipped examples need ~1e6)
+  double max_work = 2e8;         // positions x samples (examples/conical-tool: 100 x ~200)
   // Called with the share of the work done (0..1), from one thread at a time; may be empty.
   std::function<void(double)> progress;
   std::string validate() const;
