@@ -37,7 +37,7 @@ Run add_post_command(CLI::App& app) {
   cmd->add_option("apt", r.apt, "APT CL-data files (one program each, plus one for all in order)")->required();
   cmd->add_option("--machine", r.machine, "machine file, or the name of one in machines/")->required();
   cmd->add_option("--out", args->out, "output directory (written completely or not at all)")->required();
-  cmd->add_option("--dialect", r.dialect, "iso, fanuc, linuxcnc, heidenhain or sinumerik (default: the machine's)");
+  cmd->add_option("--dialect", r.dialect, dialect_names() + " (default: the machine's)");
   cmd->add_option("--tool-length", r.tool_length_mm, "spindle nose to tool tip, mm (machines that turn the head)");
   cmd->add_option("--tolerance", r.tolerance_mm, "linearisation tolerance at the tip, mm")
       ->capture_default_str()->check(CLI::PositiveNumber);

@@ -1,5 +1,7 @@
 #include "core/bspline.h"
 
+#include <fmt/format.h>
+
 #include <Eigen/Cholesky>
 #include <algorithm>
 #include <cassert>
@@ -20,6 +22,9 @@ double knot(int n_ctrl, int i) {
 
 BasisRow bspline_basis(int n_ctrl, double t, int derivative) {
   if (n_ctrl < 4) throw InputError("a cubic B-spline needs at least 4 control points");
+  if (derivative < 0 || derivative > 2) throw InputError("B-spline: derivative order must be 0, 1 or 2");
+  // A NaN would pass the clamp and turn the span index into INT_MIN (an out-of-bounds write).
+  if (!std::isfinite(t)) throw InputError(fmt::format("B-spline parameter is not finite ({}): a coordinate overflows", t));
   const int p = 3, segments = n_ctrl - 3;
   t = std::clamp(t, 0.0, 1.0);
   const int span = std::min(int(std::floor(t * segments)), segments - 1) + 3;  // knot span index
@@ -111,6 +116,7 @@ double BSpline::value(double t, int derivative) const {
 BSpline fit_bspline(const Eigen::MatrixXd& points, const std::vector<double>& ts, int n_ctrl, double smoothness) {
   if (points.rows() != Eigen::Index(ts.size())) throw InputError("fit_bspline: one parameter per point is needed");
   if (n_ctrl < 4) throw InputError("fit_bspline: at least 4 control points");
+  if (!points.allFinite()) throw InputError("fit_bspline: a point is not finite (a coordinate overflows)");
   const Eigen::MatrixXd B = bspline_basis_matrix(n_ctrl, ts, 0);
   Eigen::MatrixXd N = B.transpose() * B;
   if (smoothness > 0) {
@@ -131,6 +137,9 @@ std::vector<double> chord_length_parameters(const Eigen::MatrixXd& points) {
   const Eigen::Index m = points.rows();
   std::vector<double> t(size_t(m), 0.0);
   for (Eigen::Index i = 1; i < m; ++i) t[i] = t[i - 1] + (points.row(i) - points.row(i - 1)).norm();
+  if (m > 0 && !std::isfinite(t.back()))
+    throw InputError(fmt::format("chord length is not finite ({}): coordinates too large (beyond ~1e150 mm) or not numbers",
+                                 t.back()));
   if (m < 2 || t.back() <= 0) return uniform_parameters(int(m));
   for (double& x : t) x /= t.back();
   return t;

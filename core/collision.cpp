@@ -1,5 +1,7 @@
 #include "core/collision.h"
 
+#include <fmt/format.h>
+
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -39,6 +41,7 @@ std::string CollisionOptions::validate() const {
   if (!(clearance_mm > 0)) return "clearance: must be > 0 mm";
   if (!(gouge_tolerance_mm > 0)) return "gouge tolerance: must be > 0 mm";
   if (!(slab_mm >= 0)) return "slab: must be >= 0 mm";
+  if (max_positions < 1 || !(max_work >= 1)) return "max_positions, max_work: must be >= 1";
   return {};
 }
 
@@ -95,6 +98,12 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
   double rmin = INFINITY;
   for (const auto& c : tool.cutter) rmin = std::min(rmin, c.y());
   const double hc = o.slab_mm > 0 ? o.slab_mm : std::sqrt(2 * rmin * o.gouge_tolerance_mm);
+  const double hb = o.slab_mm > 0 ? o.slab_mm : std::max(0.5, 2 * o.clearance_mm);
+  const double sample_count = std::ceil(L / hc) + std::ceil((total - L) / hb) + 3;  // an upper bound
+  if (!(sample_count <= o.max_work))
+    throw InputError(fmt::format("collision check: the tool ({:g} mm long) would need {:.0f} axial samples, more than {}: "
+                                 "raise the gouge tolerance or the clearance",
+                                 total, sample_count, o.max_work));
   const int nc = std::max(2, int(std::ceil(L / hc)) + 1);
   for (int k = 0; k < nc; ++k) {
     const double z = L * k / (nc - 1), r = cutter_radius(tool, z);
@@ -102,7 +111,6 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
   }
   // Shank and holder: samples every h from the cutter's end to the holder's end (both included),
   // each covering the half slabs on both sides with the ball around it.
-  const double hb = o.slab_mm > 0 ? o.slab_mm : std::max(0.5, 2 * o.clearance_mm);
   const int nb = total > L ? std::max(1, int(std::ceil((total - L) / hb))) : -1;
   for (int k = 0; k <= nb; ++k) {
     const double z = L + (total - L) * k / nb, half = 0.5 * (total - L) / nb;
@@ -112,60 +120,87 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
     samples.push_back({z, std::hypot(half, r) + o.clearance_mm, false, r});
   }
   // Positions: the poses and enough steps between them that no point moves more than clearance / 2.
+  // Counted first, so that an absurd motion (50 m at 0.5 mm) is refused before any work.
+  std::vector<int> steps(poses.size(), 1);
+  std::vector<double> step_tip(poses.size(), 0.0), step_angle(poses.size(), 0.0);  // per step, into pose i
+  double positions = double(poses.size()), travel = 0;
+  for (size_t i = 1; i < poses.size(); ++i) {
+    const ToolPose &p = poses[i - 1], &q = poses[i];
+    if (!p.tip.allFinite() || !q.tip.allFinite() || !p.axis.allFinite() || !q.axis.allFinite())
+      throw InputError(fmt::format("collision check: pose {} is not finite", p.tip.allFinite() && p.axis.allFinite() ? i : i - 1));
+    const double angle = std::acos(std::clamp(p.axis.normalized().dot(q.axis.normalized()), -1.0, 1.0));
+    const double move = (q.tip - p.tip).norm() + angle * total;
+    travel += move;
+    const double n = std::max(1.0, std::ceil(move / (0.5 * o.clearance_mm)));
+    positions += n - 1;
+    if (!(positions <= o.max_positions && positions * sample_count <= o.max_work))
+      throw InputError(fmt::format("collision check: the motion ({:g} mm of travel and more) checked every {:g} mm (half the "
+                                   "clearance) at {:.0f} points along the tool needs more than {} positions or {} checks: "
+                                   "raise the clearance or split the patch",
+                                   travel, 0.5 * o.clearance_mm, sample_count, o.max_positions, o.max_work));
+    steps[i] = int(n);
+    step_tip[i] = (q.tip - p.tip).norm() / n;
+    step_angle[i] = angle / n;
+  }
   std::vector<ToolPose> pos;
-  std::vector<int> pose_of;  // input pose at or before each position
+  std::vector<int> pose_of;        // input pose at or before each position
   std::vector<char> is_pose;
+  std::vector<double> tip_run, angle_run;  // accumulated tip travel (mm) and axis turn (rad) up to each position
+  pos.reserve(size_t(positions));
   for (size_t i = 0; i < poses.size(); ++i) {
-    if (i > 0) {
-      const ToolPose &p = poses[i - 1], &q = poses[i];
-      const double angle = std::acos(std::clamp(p.axis.dot(q.axis), -1.0, 1.0));
-      const double move = (q.tip - p.tip).norm() + angle * total;
-      const int steps = std::max(1, int(std::ceil(move / (0.5 * o.clearance_mm))));
-      for (int s = 1; s < steps; ++s) {
-        pos.push_back(interpolate(p, q, double(s) / steps));
-        pose_of.push_back(int(i) - 1);
-        is_pose.push_back(0);
-      }
+    for (int s = 1; s <= steps[i]; ++s) {
+      const bool last = s == steps[i];
+      pos.push_back(last ? ToolPose{poses[i].tip, poses[i].axis.normalized()} : interpolate(poses[i - 1], poses[i], double(s) / steps[i]));
+      pose_of.push_back(last ? int(i) : int(i) - 1);
+      is_pose.push_back(last);
+      tip_run.push_back(tip_run.empty() ? 0 : tip_run.back() + step_tip[i]);
+      angle_run.push_back(angle_run.empty() ? 0 : angle_run.back() + step_angle[i]);
     }
-    pos.push_back({poses[i].tip, poses[i].axis.normalized()});
-    pose_of.push_back(int(i));
-    is_pose.push_back(1);
   }
   const int np = int(pos.size()), ns = int(samples.size());
   report.positions_checked = np;
 
-  // Per sample, walk the positions; skip queries while the axis point has moved less than its
-  // last distance to the part exceeded the reach (triangle inequality).
+  // Per sample, walk the positions; after a query whose distance exceeds the reach by `slack`, skip
+  // every position the axis point cannot have travelled `slack` to (triangle inequality; its travel
+  // is at most the tip's plus z times the axis' turn), found by bisection.
   std::vector<std::vector<std::pair<int, Hit>>> hits(static_cast<size_t>(ns));  // (position, hit)
   std::vector<long> queries(static_cast<size_t>(ns), 0);
+  int samples_done = 0;
 #pragma omp parallel for schedule(dynamic, 1)
   for (int k = 0; k < ns; ++k) {
     const Sample& s = samples[size_t(k)];
-    Eigen::Vector3d last = Eigen::Vector3d::Constant(INFINITY);
-    double slack = -1;
-    for (int p = 0; p < np; ++p) {
+    const auto run = [&](int p) { return tip_run[size_t(p)] + s.z * angle_run[size_t(p)]; };
+    for (int p = 0; p < np;) {
       const Eigen::Vector3d c = pos[size_t(p)].tip + s.z * pos[size_t(p)].axis;
-      if (slack > 0 && (c - last).norm() < slack) continue;
       const Footpoint f = part.closest(c);
       ++queries[size_t(k)];
-      last = c;
-      slack = f.distance - s.reach;
-      if (slack > 0) continue;
+      const double slack = f.distance - s.reach;
+      if (slack > 0) {
+        int lo = p + 1, hi = np;  // first position whose travel from p may reach `slack`
+        const double from = run(p);
+        while (lo < hi) {
+          const int mid = lo + (hi - lo) / 2;
+          if (run(mid) - from < slack) lo = mid + 1; else hi = mid;
+        }
+        p = lo;
+        continue;
+      }
+      const int here = p++;
       Hit h;
       h.at = f.point;
       if (s.cutter) {
         // The cutter is the solid of revolution of the spheres' radii between its flat end faces: a
         // part point below the tip plane (a floor the tip stands on) is outside it, and a point inside
         // is as deep as its way out through the side or the bottom face.
-        const Eigen::Vector3d d = f.point - pos[size_t(p)].tip;
-        const double zq = d.dot(pos[size_t(p)].axis), rho = (d - zq * pos[size_t(p)].axis).norm();
+        const Eigen::Vector3d d = f.point - pos[size_t(here)].tip;
+        const double zq = d.dot(pos[size_t(here)].axis), rho = (d - zq * pos[size_t(here)].axis).norm();
         if (zq < -1e-9 * (1 + L) || zq > L) continue;  // beyond the cutter's end: the shank's samples see it
         h.depth = std::min(cutter_radius(tool, std::clamp(zq, 0.0, L)) - rho, std::max(zq, 0.0));
         if (h.depth <= o.gouge_tolerance_mm) continue;
       } else {
         // Exact gap between the part point and the solid of revolution (2D, in the axis' half plane).
-        const Eigen::Vector3d d = f.point - pos[size_t(p)].tip;
-        const double zq = d.dot(pos[size_t(p)].axis), rho = (d - zq * pos[size_t(p)].axis).norm();
+        const Eigen::Vector3d d = f.point - pos[size_t(here)].tip;
+        const double zq = d.dot(pos[size_t(here)].axis), rho = (d - zq * pos[size_t(here)].axis).norm();
         double gap;
         Component comp;
         const double eps = 1e-9 * (1 + total);
@@ -181,7 +216,11 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
         h.depth = -gap;  // > 0: inside the body
         if (gap >= o.clearance_mm) continue;
       }
-      hits[size_t(k)].emplace_back(p, h);
+      hits[size_t(k)].emplace_back(here, h);
+    }
+    if (o.progress) {
+#pragma omp critical(flankcam_collision_progress)
+      o.progress(double(++samples_done) / ns);
     }
   }
   for (long q : queries) report.queries += q;

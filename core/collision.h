@@ -9,9 +9,12 @@
 // only when the part can be within reach (distance to the slab's bounding ball); the depth is
 // measured exactly at that nearest point. Between poses the motion is subdivided so that no point
 // of the assembly moves more than half the clearance per step, so no wall thinner than the
-// clearance slips through.
+// clearance slips through. A sample far from the part skips the positions it cannot reach the
+// part from (the distance bounds the travel; found by bisection), so the cost follows the
+// queries, not the positions times the samples.
 #pragma once
 #include <Eigen/Core>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -38,6 +41,14 @@ struct CollisionOptions {
   double clearance_mm = 1.0;        // shank and holder must stay this far from the part
   double gouge_tolerance_mm = 0.01; // the cutter may enter the part this deep (the fit's tolerance)
   double slab_mm = 0;               // axial sampling; 0: from the gouge tolerance and the radii
+  // Bounds on the work: positions grow with the motion's travel over half the clearance, axial
+  // samples with the tool's length over the slabs, and the closest-point queries are at most
+  // positions x samples. Beyond a bound check_collisions throws InputError saying what to change
+  // instead of running for hours (a 50 m part); within them a check takes at most minutes.
+  int max_positions = 1000000;   // 48 MB of poses
+  double max_work = 2e8;         // positions x samples (examples/conical-tool: 100 x ~200)
+  // Called with the share of the work done (0..1), from one thread at a time; may be empty.
+  std::function<void(double)> progress;
   std::string validate() const;
 };
 

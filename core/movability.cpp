@@ -157,7 +157,9 @@ ExploredLine explore_line(const SurfaceIndex& surface, const Eigen::Vector3d& a0
   double best_F = acceptable(best.movability) ? best.movability.F : INFINITY;
   double radius = o.radius;
   for (int round = 0; round < o.rounds && !(best_F <= o.good_enough); ++round, radius *= o.shrink) {
-    const auto [n1, n2] = normal_plane((best.b - best.a).normalized());
+    // Named copies: a lambda may not capture structured bindings in C++17 (clang rejects it).
+    const auto plane = normal_plane((best.b - best.a).normalized());
+    const Eigen::Vector3d n1 = plane.first, n2 = plane.second;
     std::mt19937 rng(o.seed + 7919u * unsigned(round));
     std::uniform_real_distribution<double> u(0, 1);
     const auto disc = [&]() {  // uniform in the disc of this round's radius; the first candidate is no change

@@ -3,13 +3,18 @@
 // link yaml-cpp. `Error` is the exception thrown (InputError, MachineError).
 #pragma once
 #include <fmt/format.h>
+#include <yaml-cpp/depthguard.h>
 #include <yaml-cpp/yaml.h>
 
 #include <Eigen/Core>
 #include <cmath>
+#include <cstddef>
+#include <map>
 #include <set>
 #include <string>
 #include <utility>
+
+#include "core/message_text.h"
 
 namespace flankcam {
 
@@ -18,15 +23,25 @@ class YamlFields {
  public:
   explicit YamlFields(std::string file) : file_(std::move(file)) {}
 
-  // Parses the file; syntax errors name their line.
+  // Parses the file; syntax errors name their line. Rejects what yaml-cpp accepts but a reader
+  // would misread: duplicate keys (yaml-cpp keeps the first), keys that are lists or mappings.
   [[nodiscard]] YAML::Node load() const {
+    YAML::Node root;
     try {
-      return YAML::LoadFile(file_);
+      root = YAML::LoadFile(file_);
+    } catch (const YAML::DeepRecursion& e) {
+      throw Error(fmt::format("{}:{}: nested too deeply (more than {} levels of lists and mappings)", file_,
+                              e.mark.line + 1, e.depth() - 1));
+    } catch (const YAML::BadFile&) {
+      throw Error(file_ + ": cannot open the file");
     } catch (const YAML::ParserException& e) {
-      throw Error(fmt::format("{}:{}: not valid YAML: {}", file_, e.mark.line + 1, e.msg));
+      throw Error(fmt::format("{}:{}: not valid YAML: {}", file_, e.mark.line + 1, escaped(e.msg)));
     } catch (const YAML::Exception& e) {
-      throw Error(file_ + ": cannot read: " + e.what());
+      throw Error(file_ + ": cannot read: " + escaped(e.what()));
     }
+    std::set<std::size_t> seen;
+    check_keys(root, "", seen);
+    return root;
   }
 
   [[noreturn]] void fail(const YAML::Node& node, const std::string& key, const std::string& what) const {
@@ -45,11 +60,11 @@ class YamlFields {
   void only_keys(const YAML::Node& map, const std::string& key, const std::set<std::string>& allowed) const {
     if (!map.IsMap()) fail(map, key.empty() ? "top level" : key, "expected a mapping of keys");
     for (const auto& kv : map) {
-      const std::string k = kv.first.as<std::string>();
+      const std::string k = key_name(kv.first, key);
       if (allowed.count(k)) continue;
       std::string known;
       for (const auto& a : allowed) known += (known.empty() ? "" : ", ") + a;
-      fail(kv.first, key.empty() ? k : key + "." + k, "unknown key (known: " + known + ")");
+      fail(kv.first, escaped(key.empty() ? k : key + "." + k), "unknown key (known: " + known + ")");
     }
   }
 
@@ -59,9 +74,15 @@ class YamlFields {
     try {
       v = n.as<double>();
     } catch (const YAML::Exception&) {
-      fail(n, key, "expected a number, got '" + n.Scalar() + "'");
+      fail(n, key, "expected a number, got " + in_quotes(n.Scalar()));
     }
-    if (!std::isfinite(v)) fail(n, key, "must be finite, got '" + n.Scalar() + "'");
+    if (!std::isfinite(v)) fail(n, key, "must be finite, got " + in_quotes(n.Scalar()));
+    return v;
+  }
+  // A number in [lo, hi] (a sane range; `unit` names the unit in the message).
+  double number_in(const YAML::Node& n, const std::string& key, double lo, double hi, const std::string& unit) const {
+    const double v = number(n, key);
+    if (!(v >= lo && v <= hi)) fail(n, key, fmt::format("must be in {:g}..{:g} {}, got {}", lo, hi, unit, in_quotes(n.Scalar())));
     return v;
   }
   double positive(const YAML::Node& n, const std::string& key) const {
@@ -103,6 +124,31 @@ class YamlFields {
   }
 
  private:
+  std::string key_name(const YAML::Node& k, const std::string& parent) const {
+    if (!k.IsScalar()) fail(k, parent.empty() ? "top level" : parent, "a key must be a plain name, not a list or mapping");
+    return k.Scalar();
+  }
+  // Every mapping in the document: scalar keys, each once. `seen` holds the positions of the
+  // collections visited: an alias shares its anchor's node (and position), which may contain it.
+  void check_keys(const YAML::Node& n, const std::string& path, std::set<std::size_t>& seen) const {
+    if (!n.IsMap() && !n.IsSequence()) return;
+    if (!seen.insert(n.Mark().pos).second) return;
+    if (n.IsSequence()) {
+      std::size_t i = 0;
+      for (const auto& item : n) check_keys(item, fmt::format("{}[{}]", path, i++), seen);
+      return;
+    }
+    std::map<std::string, int> lines;
+    for (const auto& kv : n) {
+      const std::string k = key_name(kv.first, path);
+      const std::string key = path.empty() ? k : path + "." + k;
+      const int line = kv.first.Mark().line + 1;
+      if (const auto [it, fresh] = lines.emplace(k, line); !fresh)
+        fail(kv.first, escaped(key), fmt::format("duplicate key (first at line {}, again at line {})", it->second, line));
+      check_keys(kv.second, key, seen);
+    }
+  }
+
   std::string file_;
 };
 

@@ -33,7 +33,9 @@ struct LinearAxis {
 
 struct Controller {
   bool tcp = false;             // G43.4 / TRAORI / M128: the controller takes tip + angles
-  std::string dialect = "iso";  // iso | linuxcnc | heidenhain | sinumerik
+  // A name of postproc's dialect table (postproc checks it: kinematics does not depend on postproc).
+  std::string dialect = "iso";
+  int dialect_line = 0;         // its line in the machine file (0: the default, or built in code)
   bool inverse_time = true;     // G93 for simultaneous moves
   bool linuxcnc_trt = false;    // LinuxCNC with trt kinematics active: programs give tip + angles
 };
@@ -53,8 +55,19 @@ struct Machine {
   [[nodiscard]] int tables() const;
 };
 
-// Reads and validates a machine file. Throws MachineError "FILE: FIELD: what" for a missing
-// field, a zero direction, limits in the wrong order, parallel rotary axes, and the like.
+// Sane ranges of what a machine file may say (beyond them a value is a typo or an attack, and
+// would post nonsense such as F0.0000).
+struct MachineRanges {
+  static constexpr double position_mm = 1e6;            // |linear limit|, |pivot|: 1 km
+  static constexpr double rotary_deg = 36000;            // |rotary limit|: 100 turns
+  static constexpr double linear_speed_mm_min[2] = {1, 1e6};    // 1 mm/min .. 1 km/min
+  static constexpr double rotary_speed_deg_min[2] = {1, 1e7};   // up to ~28000 rpm
+  static constexpr double gauge_length_mm = 1e4;         // 10 m
+};
+
+// Reads and validates a machine file. Throws MachineError "FILE:LINE: FIELD: what" for a missing
+// field, a value outside MachineRanges, a zero direction, limits in the wrong order, parallel
+// rotary axes, and the like. controller.dialect is kept as written (postproc checks the name).
 [[nodiscard]] Machine load_machine(const std::string& path);
 // Checks a machine built in code; throws MachineError naming the field.
 void validate(const Machine& m);

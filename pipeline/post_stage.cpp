@@ -13,11 +13,16 @@ namespace flankcam::pipeline {
 Machine find_machine(const std::string& name_or_path, const std::filesystem::path& relative_to) {
   namespace fs = std::filesystem;
   const fs::path given(name_or_path);
+  const auto load = [](const fs::path& p) {  // the dialect is postproc's to check
+    Machine m = load_machine(p.string());
+    (void)machine_dialect(m);
+    return m;
+  };
   for (const fs::path& p : {given, relative_to / given})
-    if (!p.empty() && fs::is_regular_file(p)) return load_machine(p.string());
+    if (!p.empty() && fs::is_regular_file(p)) return load(p);
   const fs::path dir = machines_dir();
   const fs::path shipped = dir / (name_or_path + ".yaml");
-  if (fs::is_regular_file(shipped)) return load_machine(shipped.string());
+  if (fs::is_regular_file(shipped)) return load(shipped);
   std::vector<std::string> names;
   for (const auto& e : fs::directory_iterator(dir))
     if (e.path().extension() == ".yaml") names.push_back(e.path().stem().string());
@@ -55,7 +60,7 @@ PostedProgram summarize(Posted posted, const std::string& file, const std::strin
 
 std::vector<Dialect> dialects_of(const Machine& m, const PostSettings& settings) {
   if (!settings.dialects.empty()) return settings.dialects;
-  return {parse_dialect(m.controller.dialect)};
+  return {machine_dialect(m)};
 }
 
 std::vector<PostedProgram> post_programs(const Machine& m, const std::vector<PostInput>& inputs, const std::string& all_name,

@@ -11,6 +11,7 @@
 
 #include "core/atomic_file.h"
 #include "core/errors.h"
+#include "core/message_text.h"
 #include "core/number_format.h"
 
 namespace flankcam {
@@ -115,8 +116,16 @@ ClProgram parse_apt(const std::string& text, const std::string& name) {
   };
   const auto number = [&](const std::string& s, const std::string& what) {
     const std::optional<double> v = parse_number(s);
-    if (!v) fail(what + ": '" + s + "' is not a number");
+    if (!v) fail(what + ": " + in_quotes(s) + " is not a number");
     return *v;
+  };
+  // Every value has a sane range: beyond it a number is garbage (int(LOADTL/1e300) was undefined,
+  // FEDRAT/1e-300 posted F0.0000, SPINDL/1e300 a 301-digit S word).
+  const auto number_in = [&](const std::string& s, const std::string& what, double lo, double hi, const char* unit) {
+    const double v = number(s, what);
+    if (!(v >= lo && v <= hi))
+      fail(fmt::format("{}: {} is outside {:g}..{:g}{}{}", what, in_quotes(s), lo, hi, *unit ? " " : "", unit));
+    return v;
   };
   const auto handle = [&](std::string s) {
     s.erase(std::remove_if(s.begin(), s.end(), [](unsigned char ch) { return std::isspace(ch); }), s.end());
@@ -141,15 +150,20 @@ ClProgram parse_apt(const std::string& text, const std::string& name) {
       if (args.empty() || upper(args[0]) != "MM") fail("UNITS: only MM is supported, got '" + rest + "'");
     } else if (major == "LOADTL") {
       if (args.empty()) fail("LOADTL: tool number missing");
-      p.tool = int(number(args[0], "LOADTL"));
+      const double t = number_in(args[0], "LOADTL", 0, AptRanges::tool_number, "");
+      if (t != std::floor(t)) fail("LOADTL: " + in_quotes(args[0]) + " is not a whole number");
+      p.tool = int(t);
     } else if (major == "CUTTER") {
       if (args.empty()) fail("CUTTER: diameter missing");
       double* fields[7] = {&p.cutter.d, &p.cutter.r, &p.cutter.e, &p.cutter.f, &p.cutter.alpha_deg, &p.cutter.beta_deg, &p.cutter.h};
-      for (size_t k = 0; k < args.size() && k < 7; ++k) *fields[k] = number(args[k], "CUTTER");
+      for (size_t k = 0; k < args.size() && k < 7; ++k)
+        *fields[k] = k == 4 || k == 5 ? number_in(args[k], "CUTTER", -180, 180, "deg")
+                                      : number_in(args[k], "CUTTER", 0, AptRanges::tool_size_mm, "mm");
     } else if (major == "FEDRAT") {
       bool got = false;
       for (const auto& a : args)
-        if (upper(a) != "MMPM" && upper(a) != "MMPR") feed = number(a, "FEDRAT"), got = true;
+        if (upper(a) != "MMPM" && upper(a) != "MMPR")
+          feed = number_in(a, "FEDRAT", AptRanges::feed_mm_min[0], AptRanges::feed_mm_min[1], "mm/min"), got = true;
       if (!got) fail("FEDRAT: no feed value");
     } else if (major == "SPINDL") {
       for (const auto& a : args) {
@@ -159,16 +173,19 @@ ClProgram parse_apt(const std::string& text, const std::string& name) {
           p.clockwise = u == "CLW";
           continue;
         }
-        p.spindle_rpm = number(a, "SPINDL");
+        p.spindle_rpm = number_in(a, "SPINDL", 0, AptRanges::spindle_rpm, "rpm");
       }
     } else if (major == "RAPID") {
       rapid_next = true;
     } else if (major == "GOTO") {
       if (args.size() != 3 && args.size() != 6) fail(fmt::format("GOTO: expected 3 or 6 values, got {}", args.size()));
       ClMove m;
-      m.pose.tip = {number(args[0], "GOTO x"), number(args[1], "GOTO y"), number(args[2], "GOTO z")};
+      const double c = AptRanges::coordinate_mm;
+      m.pose.tip = {number_in(args[0], "GOTO x", -c, c, "mm"), number_in(args[1], "GOTO y", -c, c, "mm"),
+                    number_in(args[2], "GOTO z", -c, c, "mm")};
       if (args.size() == 6) {
-        axis = {number(args[3], "GOTO i"), number(args[4], "GOTO j"), number(args[5], "GOTO k")};
+        axis = {number_in(args[3], "GOTO i", -2, 2, ""), number_in(args[4], "GOTO j", -2, 2, ""),
+                number_in(args[5], "GOTO k", -2, 2, "")};
         if (std::abs(axis.norm() - 1) > 1e-4) fail("GOTO: the tool axis (i, j, k) is not a unit vector");
         axis.normalize();
       }
@@ -204,7 +221,11 @@ ClProgram parse_apt(const std::string& text, const std::string& name) {
       if (text_part.rfind("'PROFILE", 0) == 0) {
         std::istringstream q(text_part.substr(8));
         double z, r;
-        if (q >> z >> r) p.profile.emplace_back(z, r);
+        if (q >> z >> r) {
+          if (!(std::abs(z) <= AptRanges::tool_size_mm && std::abs(r) <= AptRanges::tool_size_mm))
+            fail(fmt::format("PPRINT 'PROFILE: z {:g}, r {:g} outside +-{:g} mm", z, r, AptRanges::tool_size_mm));
+          p.profile.emplace_back(z, r);
+        }
       } else if (text_part.size() >= 2) {
         p.comments.push_back(text_part.substr(1, text_part.size() - 2));
       }

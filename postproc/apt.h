@@ -50,9 +50,19 @@ struct ClProgram {
 [[nodiscard]] std::string apt_text(const ClProgram& p);
 void write_apt(const std::string& path, const ClProgram& p);
 
+// What read_apt accepts; a value outside is an error naming the line.
+struct AptRanges {
+  static constexpr double coordinate_mm = 1e6;                 // |GOTO x, y, z|
+  static constexpr double feed_mm_min[2] = {0.1, 1e6};         // FEDRAT (programs write F to 0.1 mm/min)
+  static constexpr double spindle_rpm = 1e6;                   // SPINDL, 0 .. this
+  static constexpr double tool_number = 99999;                 // LOADTL, a whole number 0 .. this
+  static constexpr double tool_size_mm = 1e4;                  // CUTTER lengths, PPRINT 'PROFILE values
+};
+
 // Reads APT CL-data: `$` continuations, `$$` comments, FEDRAT/f,MMPM or FEDRAT/MMPM,f,
 // SPINDL/n,RPM,CLW or SPINDL/RPM,n,CLW, RAPID for the next GOTO, GOTO with 3 or 6 values.
-// Other major words are skipped. Throws InputError "FILE:LINE: ..." for what it cannot parse.
+// Other major words are skipped. Throws InputError "FILE:LINE: ..." for what it cannot parse
+// and for values outside AptRanges.
 [[nodiscard]] ClProgram read_apt(const std::string& path);
 [[nodiscard]] ClProgram parse_apt(const std::string& text, const std::string& name);
 

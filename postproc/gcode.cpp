@@ -9,6 +9,7 @@
 
 #include "core/atomic_file.h"
 #include "core/errors.h"
+#include "core/message_text.h"
 #include "core/number_format.h"
 
 namespace flankcam {
@@ -300,8 +301,24 @@ struct ReaderState {
 
 double number(const std::string& s, const std::string& file, int line) {
   const std::optional<double> v = parse_number(s);
-  if (!v) fail(file, line, "'" + s + "' is not a number");
+  if (!v) fail(file, line, in_quotes(s) + " is not a number");
   return *v;
+}
+
+// What a program may say (beyond it a value is garbage, and int(T1e30) would be undefined).
+constexpr double kMaxCoordinate = 1e6;  // mm, and degrees of unwound rotary axes
+constexpr double kMaxFeed = 1e7;        // mm/min, or 1/min under G93
+constexpr int kMaxTool = 99999;
+
+double number_in(const std::string& s, const std::string& what, double lo, double hi, const std::string& file, int line) {
+  const double v = number(s, file, line);
+  if (!(v >= lo && v <= hi)) fail(file, line, fmt::format("{} {} is outside {:g}..{:g}", what, in_quotes(s), lo, hi));
+  return v;
+}
+int tool_number(const std::string& s, const std::string& file, int line) {
+  const double v = number_in(s, "tool number", 0, kMaxTool, file, line);
+  if (v != std::floor(v)) fail(file, line, "tool number " + in_quotes(s) + " is not a whole number");
+  return int(v);
 }
 
 // Index of an axis letter in the programmed values: 0..2 linear, 3..4 rotary, -1 none.
@@ -348,7 +365,7 @@ void gcode_line(std::string s, Dialect d, const std::array<std::string, 2>& rota
       while (k < w.size() && std::isalpha(static_cast<unsigned char>(w[k]))) ++k;
       letter = w.substr(0, k), value = w.substr(k);
     }
-    if (letter.empty()) fail(file, line, "'" + w + "' is not a word");
+    if (letter.empty()) fail(file, line, in_quotes(w) + " is not a word");
     if (letter == "M") {
       const double m = number(value, file, line);
       if (m == 2 || m == 30) st.ended = true;
@@ -369,11 +386,11 @@ void gcode_line(std::string s, Dialect d, const std::array<std::string, 2>& rota
       else fail(file, line, "G" + value + " is not a code flankcam writes");
       continue;
     }
-    if (letter == "T") { st.point.tool = int(v); continue; }
-    if (letter == "F") { st.point.f = v; continue; }
+    if (letter == "T") { st.point.tool = tool_number(value, file, line); continue; }
+    if (letter == "F") { st.point.f = number_in(value, "F", 0, kMaxFeed, file, line); continue; }
     const int k = axis_index(letter, rotary);
-    if (k < 0) fail(file, line, "'" + w + "': no such axis on this machine");
-    set_axis(st.point, k, v);
+    if (k < 0) fail(file, line, in_quotes(w) + ": no such axis on this machine");
+    set_axis(st.point, k, number_in(value, letter, -kMaxCoordinate, kMaxCoordinate, file, line));
     moved = true;
   }
   if (!moved) return;
@@ -398,22 +415,22 @@ void heidenhain_line(const std::string& s, const std::array<std::string, 2>& rot
   if (rest.rfind("TOOL CALL", 0) == 0) {
     std::istringstream t(rest.substr(9));
     std::string first;
-    if (t >> first && std::isdigit(static_cast<unsigned char>(first[0]))) st.point.tool = int(number(first, file, line));
+    if (t >> first && std::isdigit(static_cast<unsigned char>(first[0]))) st.point.tool = tool_number(first, file, line);
     return;
   }
   if (rest[0] == 'M') return;
-  if (rest.rfind("L ", 0) != 0) fail(file, line, "'" + rest + "' is not a block flankcam writes");
+  if (rest.rfind("L ", 0) != 0) fail(file, line, in_quotes(rest) + " is not a block flankcam writes");
   std::istringstream lw(rest.substr(2));
   bool rapid = false;
   while (lw >> w) {
     if (w == "FMAX") { rapid = true; continue; }
     if (w == "R0") continue;
-    if (w[0] == 'F') { st.point.f = number(w.substr(1), file, line); continue; }
+    if (w[0] == 'F') { st.point.f = number_in(w.substr(1), "F", 0, kMaxFeed, file, line); continue; }
     if (w[0] == 'M') continue;
     const int k = axis_index(w.substr(0, 1), rotary);
-    if (k < 0) fail(file, line, "'" + w + "': no such axis on this machine");
-    if (w.size() < 2 || (w[1] != '+' && w[1] != '-')) fail(file, line, "'" + w + "': Heidenhain coordinates carry a sign");
-    set_axis(st.point, k, number(w.substr(1), file, line));
+    if (k < 0) fail(file, line, in_quotes(w) + ": no such axis on this machine");
+    if (w.size() < 2 || (w[1] != '+' && w[1] != '-')) fail(file, line, in_quotes(w) + ": Heidenhain coordinates carry a sign");
+    set_axis(st.point, k, number_in(w.substr(1), w.substr(0, 1), -kMaxCoordinate, kMaxCoordinate, file, line));
   }
   st.point.line = line;
   st.point.rapid = rapid;

@@ -1,41 +1,64 @@
 #include "postproc/nc_program.h"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <algorithm>
 #include <cmath>
 
 #include "core/errors.h"
+#include "core/message_text.h"
 #include "postproc/tool_export.h"
 
 namespace flankcam {
 
-std::string to_string(Dialect d) {
-  switch (d) {
-    case Dialect::Iso: return "iso";
-    case Dialect::LinuxCnc: return "linuxcnc";
-    case Dialect::Heidenhain: return "heidenhain";
-    case Dialect::Sinumerik: return "sinumerik";
-  }
-  return "?";
+const std::vector<DialectInfo>& dialect_table() {
+  static const std::vector<DialectInfo> table = {
+      {Dialect::Iso, "iso", {"fanuc"}, ".nc", "ISO/Fanuc G-code (G43.4 for TCP, G93 inverse time)"},
+      {Dialect::LinuxCnc, "linuxcnc", {}, ".ngc", "LinuxCNC rs274ngc (joints, or tip + angles with trt kinematics)"},
+      {Dialect::Heidenhain, "heidenhain", {}, ".h", "Heidenhain conversational (L blocks, M128 for TCP)"},
+      {Dialect::Sinumerik, "sinumerik", {}, ".mpf", "Siemens Sinumerik (TRAORI for TCP)"},
+  };
+  return table;
 }
+
+const DialectInfo& dialect_info(Dialect d) {
+  for (const DialectInfo& i : dialect_table())
+    if (i.dialect == d) return i;
+  throw InputError("dialect: not in the table");
+}
+
+std::string dialect_names() {
+  std::string out;
+  for (const DialectInfo& i : dialect_table()) {
+    out += (out.empty() ? "" : ", ") + i.name;
+    if (!i.aliases.empty()) out += fmt::format(" (or {})", fmt::join(i.aliases, ", "));
+  }
+  return out;
+}
+
+std::string to_string(Dialect d) { return dialect_info(d).name; }
+
+namespace {
+const DialectInfo* find_dialect(const std::string& name) {
+  for (const DialectInfo& i : dialect_table())
+    if (i.name == name || std::find(i.aliases.begin(), i.aliases.end(), name) != i.aliases.end()) return &i;
+  return nullptr;
+}
+}  // namespace
 
 Dialect parse_dialect(const std::string& name) {
-  if (name == "iso" || name == "fanuc") return Dialect::Iso;
-  if (name == "linuxcnc") return Dialect::LinuxCnc;
-  if (name == "heidenhain") return Dialect::Heidenhain;
-  if (name == "sinumerik") return Dialect::Sinumerik;
-  throw InputError("dialect: '" + name + "' is not one of iso, fanuc, linuxcnc, heidenhain, sinumerik");
+  if (const DialectInfo* i = find_dialect(name)) return i->dialect;
+  throw InputError(fmt::format("dialect: {} is not one of {}", in_quotes(name), dialect_names()));
 }
 
-std::string file_extension(Dialect d) {
-  switch (d) {
-    case Dialect::Iso: return ".nc";
-    case Dialect::LinuxCnc: return ".ngc";
-    case Dialect::Heidenhain: return ".h";
-    case Dialect::Sinumerik: return ".mpf";
-  }
-  return ".nc";
+std::string file_extension(Dialect d) { return dialect_info(d).extension; }
+
+Dialect machine_dialect(const Machine& m) {
+  if (const DialectInfo* i = find_dialect(m.controller.dialect)) return i->dialect;
+  const std::string where = m.controller.dialect_line > 0 ? fmt::format("{}:{}", m.file, m.controller.dialect_line) : m.file;
+  throw MachineError(fmt::format("{}: controller.dialect: {} is not one of {}", where,
+                                 in_quotes(m.controller.dialect), dialect_names()));
 }
 
 std::string PostOptions::validate() const {

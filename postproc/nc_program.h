@@ -13,10 +13,26 @@
 namespace flankcam {
 
 enum class Dialect { Iso, LinuxCnc, Heidenhain, Sinumerik };
+// The one table of dialects: machine files (controller.dialect), `post --dialect` and job files
+// (post.dialects) all accept exactly these names and aliases.
+struct DialectInfo {
+  Dialect dialect = Dialect::Iso;
+  std::string name;                  // canonical: iso, linuxcnc, heidenhain, sinumerik
+  std::vector<std::string> aliases;  // also accepted (fanuc for iso)
+  std::string extension;             // of its programs: .nc, .ngc, .h, .mpf
+  std::string help;                  // what it is, one line
+};
+[[nodiscard]] const std::vector<DialectInfo>& dialect_table();
+[[nodiscard]] const DialectInfo& dialect_info(Dialect d);
+// "iso (or fanuc), linuxcnc, heidenhain, sinumerik": for help texts and messages.
+[[nodiscard]] std::string dialect_names();
 [[nodiscard]] std::string to_string(Dialect d);
-// "iso" (also "fanuc"), "linuxcnc", "heidenhain", "sinumerik"; throws InputError otherwise.
+// A name or alias of the table; throws InputError "dialect: 'X' is not one of ..." otherwise.
 [[nodiscard]] Dialect parse_dialect(const std::string& name);
 [[nodiscard]] std::string file_extension(Dialect d);  // ".nc", ".ngc", ".h", ".mpf"
+// The machine's controller.dialect checked against the table (kinematics keeps it as text);
+// throws MachineError "FILE:LINE: controller.dialect: ..." naming the machine file.
+[[nodiscard]] Dialect machine_dialect(const Machine& m);
 
 struct NcComment {
   std::string text;

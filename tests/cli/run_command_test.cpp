@@ -217,7 +217,7 @@ TEST_CASE("the bundled examples are what the generators make, and their jobs rea
   CHECK(test::read_text(dir.file("blade/lines.yaml")) == test::read_text(ex + "blade/lines.yaml"));
 }
 
-TEST_CASE("flankcam run: the setup places the part on the machine; programs follow, CL-data stays in part coordinates") {
+TEST_CASE("flankcam run: the setup places the part on the machine, programs follow while CL-data stays in part coordinates") {
   test::ScratchDir dir("run-setup");
   std::string job = test::read_text(blade_job(dir, "xyzac-trt", "linuxcnc", 1));
   job.replace(job.find("post: {dialects: [linuxcnc]}"), 28,

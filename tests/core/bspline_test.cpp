@@ -5,6 +5,8 @@
 #include <cmath>
 #include <random>
 
+#include "core/errors.h"
+
 using namespace flankcam;
 
 namespace {
@@ -111,4 +113,27 @@ TEST_CASE("chord-length parameters run from 0 to 1 in proportion to distance") {
   CHECK(t[1] == doctest::Approx(0.2));
   CHECK(t[2] == doctest::Approx(0.8));
   CHECK(t[3] == 1.0);
+}
+
+// Issue 12 item 1: a line coordinate of 1e308 overflowed the chord length, the NaN parameter made
+// the span index INT_MIN and the basis matrix was written out of bounds.
+TEST_CASE("non-finite parameters and overflowing chord lengths are input errors, not out-of-bounds writes") {
+  const double nan = std::nan(""), inf = INFINITY;
+  for (double t : {nan, inf, -inf}) {
+    CAPTURE(t);
+    CHECK_THROWS_AS((void)bspline_basis(6, t), InputError);
+    CHECK_THROWS_AS((void)bspline_basis_matrix(6, {0.0, t, 1.0}), InputError);
+  }
+  Eigen::MatrixXd far(3, 3);
+  far << 0, 0, 0, 1e308, 0, 0, -1e308, 0, 0;  // |p1 - p0| + |p2 - p1| = inf
+  CHECK_THROWS_WITH_AS((void)chord_length_parameters(far), doctest::Contains("not finite"), InputError);
+  Eigen::MatrixXd bad = Eigen::MatrixXd::Zero(5, 1);
+  bad(2, 0) = nan;
+  CHECK_THROWS_AS((void)fit_bspline(bad, uniform_parameters(5), 4), InputError);
+  // Parameters outside [0, 1] are clamped: the ends of the curve, as before.
+  const BasisRow lo = bspline_basis(6, -1e300), hi = bspline_basis(6, 1e300);
+  CHECK(lo.first == 0);
+  CHECK(lo.w[0] == doctest::Approx(1));
+  CHECK(hi.first == 2);
+  CHECK(hi.w[3] == doctest::Approx(1));
 }

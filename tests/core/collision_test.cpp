@@ -2,7 +2,10 @@
 
 #include <doctest/doctest.h>
 
+#include <algorithm>
+
 #include "core/envelope.h"
+#include "core/errors.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -76,7 +79,7 @@ TEST_CASE("holder cone against a plane: the exact interference depth at the cone
   }
 }
 
-TEST_CASE("holder cylinder against a parallel cylinder: exact depth; the cutter alone gouges when pushed in") {
+TEST_CASE("holder cylinder against a parallel cylinder: exact depth, and the cutter alone gouges when pushed in") {
   ToolAssembly t = assembly();
   t.holder_diameter = t.holder_diameter_far = 40;  // cylinder r = 20 over z in [50, 90]
   CollisionOptions o;
@@ -123,7 +126,7 @@ TEST_CASE("a holder passing a thin wall between two clear poses is caught") {
   MESSAGE(r.positions_checked << " positions, " << r.queries << " queries");
 }
 
-TEST_CASE("a clear flank motion along an exact envelope raises no alarm; pushing the part 0.2 mm in does") {
+TEST_CASE("a clear flank motion along an exact envelope raises no alarm, pushing the part 0.2 mm in does") {
   AnalyticMotionOptions mo;
   mo.kind = "twist";
   const LineMotion m = analytic_motion(mo);
@@ -185,4 +188,78 @@ TEST_CASE("the cutter is flat-ended: standing on a floor is no gouge, sinking in
   REQUIRE(r.intervals.size() == 1);
   CHECK(r.intervals[0].component == Component::Tool);
   CHECK(r.intervals[0].max_depth_mm == doctest::Approx(0.3).epsilon(1e-6));
+}
+
+// Issue 12 item 7: a 50 m part made the check run for hours (positions every half clearance, every
+// axial sample walking every position). Far samples now skip by bisection, the work is bounded by
+// CollisionOptions, and progress is reported.
+TEST_CASE("a 50 m pass over a thin wall finds the wall, skips far positions, reports progress and stays within the bounds") {
+  // A wall 0.6 mm thick (thinner than the clearance) 200 mm high at x = 25 m; the tool (92 mm
+  // long) moves 50 m along x with its axis vertical, the tip 2 mm above the wall's foot.
+  TriMesh part = box({25000, -100, -5}, {25000.6, 100, 195});
+  const SurfaceIndex index(part);
+  const ToolAssembly t = assembly();
+  const std::vector<ToolPose> poses = {{Eigen::Vector3d(0, 0, 2), Eigen::Vector3d::UnitZ()},
+                                       {Eigen::Vector3d(50000, 0, 2), Eigen::Vector3d::UnitZ()}};
+  CollisionOptions o;
+  std::vector<double> seen;
+  o.progress = [&](double f) { seen.push_back(f); };
+  const CollisionReport r = check_collisions(index, poses, t, o);
+  CHECK(r.positions_checked == 100001);  // 50 m at half the 1 mm clearance, both ends
+  // Every component passes through the wall.
+  REQUIRE(r.intervals.size() == 3);
+  for (const CollisionInterval& iv : r.intervals) {
+    CAPTURE(to_string(iv.component));
+    CHECK(iv.pose_begin == 0);
+    CHECK(iv.pose_end == 1);
+    CHECK(iv.at.x() >= 25000 - 1e-9);
+    CHECK(iv.at.x() <= 25000.6 + 1e-9);
+  }
+  // Far from the wall a sample jumps ahead by its distance: the queries are a small share of
+  // positions x samples (each sample needs ~log2 of the distances plus the positions near the wall).
+  const double samples_times_positions = double(r.positions_checked) * 200;  // more than 100 samples
+  MESSAGE(r.queries << " queries for " << r.positions_checked << " positions");
+  CHECK(double(r.queries) < 0.02 * samples_times_positions);
+  REQUIRE_FALSE(seen.empty());
+  CHECK(std::is_sorted(seen.begin(), seen.end()));
+  CHECK(seen.front() > 0);
+  CHECK(seen.back() == 1.0);
+
+  // Without the wall nothing is reported; with a tighter bound the check refuses before working.
+  CHECK(check_collisions(SurfaceIndex(box({0, 500, -5}, {50000, 501, 195})), poses, t, CollisionOptions{}).clear());
+  CollisionOptions small;
+  small.max_positions = 50000;
+  CHECK_THROWS_WITH_AS((void)check_collisions(index, poses, t, small),
+                       doctest::Contains("collision check: the motion (50000 mm of travel and more) checked every 0.5 mm"),
+                       InputError);
+  CollisionOptions tiny_clearance;
+  tiny_clearance.clearance_mm = 1e-4;  // 1e9 positions: refused at once, not run for hours
+  CHECK_THROWS_WITH_AS((void)check_collisions(index, poses, t, tiny_clearance), doctest::Contains("raise the clearance"),
+                       InputError);
+}
+
+TEST_CASE("a motion given as two poses or as a pose every half clearance reports the same collisions") {
+  // The same positions, once interpolated (the bisection skips across the steps between the two
+  // poses) and once as input poses (it skips across poses): the same walls, depths and points.
+  TriMesh part = box({50, -100, -5}, {50.6, 100, 195});
+  const SurfaceIndex index(part);
+  const ToolAssembly t = assembly();
+  const std::vector<ToolPose> one = {{Eigen::Vector3d(0, 0, 2), Eigen::Vector3d::UnitZ()},
+                                     {Eigen::Vector3d(100, 0, 2), Eigen::Vector3d::UnitZ()}};
+  std::vector<ToolPose> many;  // the same motion with an input pose every 0.5 mm (no positions between)
+  for (int k = 0; k <= 200; ++k) many.push_back({Eigen::Vector3d(0.5 * k, 0, 2), Eigen::Vector3d::UnitZ()});
+  CollisionReport a = check_collisions(index, one, t, CollisionOptions{});
+  CollisionReport b = check_collisions(index, many, t, CollisionOptions{});
+  CHECK(a.positions_checked == b.positions_checked);
+  REQUIRE(a.intervals.size() == 3);
+  REQUIRE(b.intervals.size() == 3);
+  for (auto* r : {&a, &b})
+    std::sort(r->intervals.begin(), r->intervals.end(),
+              [](const CollisionInterval& x, const CollisionInterval& y) { return x.component < y.component; });
+  for (size_t k = 0; k < a.intervals.size(); ++k) {
+    CAPTURE(k);
+    CHECK(a.intervals[k].component == b.intervals[k].component);
+    CHECK(a.intervals[k].max_depth_mm == doctest::Approx(b.intervals[k].max_depth_mm));
+    CHECK(a.intervals[k].at.x() == doctest::Approx(b.intervals[k].at.x()));
+  }
 }

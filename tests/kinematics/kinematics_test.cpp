@@ -194,3 +194,60 @@ TEST_CASE("machine files: a missing field, a zero direction, limits in the wrong
   }
   CHECK_THROWS_AS((void)load_machine(dir.file("absent.yaml")), MachineError);
 }
+
+// Issue 12 items 8 and 9: nonsense values and YAML that yaml-cpp accepts but a reader misreads.
+TEST_CASE("machine files: values outside their ranges, duplicate or complex keys, deep nesting name the line and key") {
+  test::ScratchDir dir("machines-ranges");
+  const std::string good = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/machines/xyzac-trt.yaml");
+  const auto replaced = [&](const std::string& from, const std::string& to) {
+    std::string s = good;
+    const size_t at = s.find(from);
+    REQUIRE(at != std::string::npos);
+    return s.replace(at, from.size(), to);
+  };
+  struct Bad {
+    std::string text, expect;
+  };
+  const std::vector<Bad> cases = {
+      {replaced("X: {limits: [-500, 500], speed: 30000}", "X: {limits: [-500, 500], speed: 1e-300}"),
+       "m.yaml:7: linear.X.speed: must be in 1..1e+06 mm/min, got '1e-300'"},
+      {replaced("limits: [-120, 30], speed: 5400", "limits: [-120, 30], speed: 1e-300"),
+       "m.yaml:11: rotary.A.speed: must be in 1..1e+07 deg/min, got '1e-300'"},
+      {replaced("Y: {limits: [-400, 400]", "Y: {limits: [-1e300, 400]"), "m.yaml:8: linear.Y.limits[0]: must be in -1e+06..1e+06 mm"},
+      {replaced("limits: [-120, 30]", "limits: [-120, 1e300]"), "m.yaml:11: rotary.A.limits[1]: must be in -36000..36000 deg"},
+      {replaced("pivot: [0, 0, -60]", "pivot: [0, 0, -1e300]"), "m.yaml:11: rotary.A.pivot[2]: must be in -1e+06..1e+06 mm"},
+      {good + "gauge_length: 1e300\n", "gauge_length: must be in 0..10000 mm"},
+      {good + "name: again\n", "m.yaml:15: name: duplicate key (first at line 4, again at line 15)"},
+      {replaced("X: {limits: [-500, 500], speed: 30000}", "X: {limits: [-500, 500], speed: 30000, speed: 1}"),
+       "m.yaml:7: linear.X.speed: duplicate key (first at line 7, again at line 7)"},
+      {"? [a, b]\n: 1\n" + good, "m.yaml:1: top level: a key must be a plain name, not a list or mapping"},
+      {"name: " + std::string(3000, '[') + std::string(3000, ']') + "\n", "m.yaml:1: nested too deeply"},
+      {"name: &x [1, *x]\n", "m.yaml:1: name: expected a string"},  // an alias cycle: no hang
+      {replaced("speed: 5400", "speed: \"54\\n00\""), "rotary.A.speed: expected a number, got '54\\n00'"},
+  };
+  for (const auto& c : cases) {
+    CAPTURE(c.expect);
+    test::write_text(dir.file("m.yaml"), c.text);
+    try {
+      (void)load_machine(dir.file("m.yaml"));
+      FAIL("accepted");
+    } catch (const MachineError& e) {
+      const std::string what = e.what();
+      CHECK(what.find(c.expect) != std::string::npos);
+      CHECK(what.find('\n') == std::string::npos);  // one line
+    }
+  }
+}
+
+TEST_CASE("machine files: the dialect is kept as written with its line, for postproc to check") {
+  test::ScratchDir dir("machines-dialect");
+  std::string text = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/machines/xyzac-trt.yaml");
+  text.replace(text.find("dialect: linuxcnc"), 17, "dialect: fanuc");
+  test::write_text(dir.file("m.yaml"), text);
+  const Machine m = load_machine(dir.file("m.yaml"));
+  CHECK(m.controller.dialect == "fanuc");
+  CHECK(m.controller.dialect_line == 14);
+  Machine built = m;
+  built.controller.dialect.clear();
+  CHECK_THROWS_WITH_AS(validate(built), doctest::Contains("controller.dialect: empty"), MachineError);
+}

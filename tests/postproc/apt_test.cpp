@@ -78,3 +78,33 @@ TEST_CASE("APT reader: other posts' orders and continuations are accepted, junk 
   CHECK(error("FEDRAT/100\nGOTO/1,2,$\n") == "bad.apt:2: the file ends inside a statement continued with $");
   CHECK(error("PARTNO/X\n") == "bad.apt: no GOTO moves");
 }
+
+// Issue 12 item 8: LOADTL/1e300 became T-2147483648 (undefined behaviour), FEDRAT/1e-300 posted
+// F0.0000, SPINDL/1e300 a 301-digit S word.
+TEST_CASE("APT reader: every value has a range, and a value outside it names its line") {
+  const auto error = [](const std::string& text) {
+    try {
+      (void)parse_apt(text, "bad.apt");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  const std::string moves = "FEDRAT/100\nGOTO/1,2,3\n";
+  CHECK(error("LOADTL/1e300\n" + moves) == "bad.apt:1: LOADTL: '1e300' is outside 0..99999");
+  CHECK(error("LOADTL/2.5\n" + moves) == "bad.apt:1: LOADTL: '2.5' is not a whole number");
+  CHECK(error("LOADTL/-1\n" + moves) == "bad.apt:1: LOADTL: '-1' is outside 0..99999");
+  CHECK(error("FEDRAT/1e-300\nGOTO/1,2,3\n") == "bad.apt:1: FEDRAT: '1e-300' is outside 0.1..1e+06 mm/min");
+  CHECK(error("SPINDL/1e300,RPM\n" + moves) == "bad.apt:1: SPINDL: '1e300' is outside 0..1e+06 rpm");
+  CHECK(error("FEDRAT/100\nGOTO/1e300,2,3\n") == "bad.apt:2: GOTO x: '1e300' is outside -1e+06..1e+06 mm");
+  CHECK(error("FEDRAT/100\nGOTO/1,2,3,1e308,1e308,0\n") == "bad.apt:2: GOTO i: '1e308' is outside -2..2");
+  CHECK(error("CUTTER/1e300\n" + moves) == "bad.apt:1: CUTTER: '1e300' is outside 0..10000 mm");
+  CHECK(error("PPRINT/'PROFILE 0 1e300'\n" + moves) == "bad.apt:1: PPRINT 'PROFILE: z 0, r 1e+300 outside +-10000 mm");
+  CHECK(error("PARTNO/X\nFEDRAT/1\nGOTO/1,2,3\n") == "accepted");
+  // The bounds themselves are accepted.
+  const ClProgram p = parse_apt("LOADTL/99999\nSPINDL/1e6,RPM\nFEDRAT/0.1\nGOTO/-1e6,1e6,0\n", "edge.apt");
+  CHECK(p.tool == 99999);
+  CHECK(p.spindle_rpm == 1e6);
+  CHECK(p.moves.at(0).feed_mm_min == 0.1);
+  CHECK(p.moves.at(0).pose.tip.x() == -1e6);
+}

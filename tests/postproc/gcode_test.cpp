@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <regex>
+#include <set>
 #include <sstream>
 #include <sys/wait.h>
 
@@ -296,4 +297,73 @@ TEST_CASE("LinuxCNC's rs274 accepts the linuxcnc programs and reaches the same e
     }
     MESSAGE(c.label << ": rs274 accepted " << got.size() << " moves, all end points equal to 4 decimals");
   }
+}
+
+// Issue 12 item 8: T1e30 was int(1e30), undefined behaviour.
+TEST_CASE("NC reader: tool numbers, feeds and coordinates outside their ranges name the line") {
+  const auto error = [](const std::string& text, Dialect d) {
+    try {
+      (void)parse_nc(text, d, {"A", "C"}, "bad.nc");
+    } catch (const InputError& e) {
+      return std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  CHECK(error("T1e30 M6\nG0 X1\nM30\n", Dialect::Iso) == "bad.nc:1: tool number '1E30' is outside 0..99999");
+  CHECK(error("T-1 M6\nG0 X1\nM30\n", Dialect::Iso) == "bad.nc:1: tool number '-1' is outside 0..99999");
+  CHECK(error("T2.5 M6\nG0 X1\nM30\n", Dialect::LinuxCnc) == "bad.nc:1: tool number '2.5' is not a whole number");
+  CHECK(error("G0 X1e300\nM30\n", Dialect::Iso) == "bad.nc:1: X '1E300' is outside -1e+06..1e+06");
+  CHECK(error("G1 X1 F1e300\nM30\n", Dialect::Iso) == "bad.nc:1: F '1E300' is outside 0..1e+07");
+  CHECK(error("G1 X1 F-5\nM30\n", Dialect::Sinumerik) == "bad.nc:1: F '-5' is outside 0..1e+07");
+  CHECK(error("0 BEGIN PGM A MM\n1 TOOL CALL 1e30 Z S1000\n2 END PGM A MM\n", Dialect::Heidenhain) ==
+        "bad.nc:2: tool number '1e30' is outside 0..99999");
+  CHECK(error("0 BEGIN PGM A MM\n1 L X+1e300 FMAX\n2 END PGM A MM\n", Dialect::Heidenhain) ==
+        "bad.nc:2: X '+1e300' is outside -1e+06..1e+06");
+  CHECK(error("G0 X\"a\nM30\n", Dialect::Iso).find('\n') == std::string::npos);
+  const std::vector<NcPoint> ok = parse_nc("T99999 M6\nG1 X-1e6 C1e6 F1e7\nM30\n", Dialect::Iso, {"A", "C"}, "ok.nc");
+  REQUIRE(ok.size() == 1);
+  CHECK(ok[0].tool == 99999);
+  CHECK(ok[0].at.linear.x() == -1e6);
+  CHECK(ok[0].f == 1e7);
+}
+
+TEST_CASE("one dialect table: names and aliases parse back, extensions differ, machine files accept the aliases") {
+  std::set<std::string> extensions;
+  for (const DialectInfo& i : dialect_table()) {
+    CAPTURE(i.name);
+    CHECK(parse_dialect(i.name) == i.dialect);
+    CHECK(to_string(i.dialect) == i.name);
+    for (const std::string& a : i.aliases) CHECK(parse_dialect(a) == i.dialect);
+    CHECK(file_extension(i.dialect) == i.extension);
+    CHECK(extensions.insert(i.extension).second);
+    CHECK(dialect_names().find(i.name) != std::string::npos);
+    CHECK_FALSE(i.help.empty());
+  }
+  CHECK(dialect_table().size() == 4);
+  CHECK(dialect_names() == "iso (or fanuc), linuxcnc, heidenhain, sinumerik");
+  CHECK_THROWS_WITH_AS((void)parse_dialect("klingon"),
+                       "dialect: 'klingon' is not one of iso (or fanuc), linuxcnc, heidenhain, sinumerik", InputError);
+
+  for (const char* name : {"xyzac-trt", "xyzbc-trt", "xyzbc-head-table", "xyzbc-nutating", "xyzca-head-head"}) {
+    CAPTURE(name);
+    const Machine m = shipped(name);
+    CHECK(to_string(machine_dialect(m)) == m.controller.dialect);
+  }
+  test::ScratchDir dir("dialect-table");
+  std::string text = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/machines/xyzac-trt.yaml");
+  const size_t at = text.find("dialect: linuxcnc");
+  REQUIRE(at != std::string::npos);
+  const auto with = [&](const std::string& d) {
+    std::string t = text;
+    test::write_text(dir.file("m.yaml"), t.replace(at, 17, "dialect: " + d));
+    return load_machine(dir.file("m.yaml"));
+  };
+  CHECK(machine_dialect(with("fanuc")) == Dialect::Iso);  // was rejected while --dialect fanuc worked
+  CHECK(machine_dialect(with("sinumerik")) == Dialect::Sinumerik);
+  CHECK_THROWS_WITH_AS((void)machine_dialect(with("klingon")),
+                       (dir.file("m.yaml") + ":14: controller.dialect: 'klingon' is not one of iso (or fanuc), linuxcnc, "
+                                             "heidenhain, sinumerik").c_str(),
+                       MachineError);
+  CHECK_THROWS_WITH_AS((void)machine_dialect(with("\"fa\\nnuc\"")), doctest::Contains("controller.dialect: 'fa\\nnuc' is not"),
+                       MachineError);
 }

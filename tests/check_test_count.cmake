@@ -1,0 +1,32 @@
+# CTest test: every doctest test case must be one CTest test. Compares the number of tests CTest
+# knows (ctest -N in BINARY_DIR, this check excluded) with the sum of the suites' own counts
+# (`suite --list-test-cases`). A name doctest_discover_tests splits (at ';') makes them differ.
+# Usage: cmake -DBINARY_DIR=... -DCTEST=... -DSELF=name -DSUITES=exe1|exe2 -P check_test_count.cmake
+string(REPLACE "|" ";" suites "${SUITES}")
+set(listed 0)
+foreach(exe IN LISTS suites)
+  execute_process(COMMAND "${exe}" --list-test-cases OUTPUT_VARIABLE out RESULT_VARIABLE rc)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "${exe} --list-test-cases failed (${rc})")
+  endif()
+  if(NOT out MATCHES "passing the current filters: ([0-9]+)")
+    message(FATAL_ERROR "${exe} --list-test-cases: no count in its output")
+  endif()
+  math(EXPR listed "${listed} + ${CMAKE_MATCH_1}")
+endforeach()
+execute_process(COMMAND "${CTEST}" -N WORKING_DIRECTORY "${BINARY_DIR}" OUTPUT_VARIABLE out RESULT_VARIABLE rc)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "ctest -N failed (${rc})")
+endif()
+string(REGEX MATCHALL "\n *Test +#[0-9]+: [^\n]*" tests "${out}")
+set(discovered 0)
+foreach(t IN LISTS tests)
+  if(NOT t MATCHES ": ${SELF}$")
+    math(EXPR discovered "${discovered} + 1")
+  endif()
+endforeach()
+message(STATUS "doctest lists ${listed} test cases, CTest has ${discovered} tests")
+if(NOT listed EQUAL discovered)
+  message(FATAL_ERROR "CTest has ${discovered} tests but the suites list ${listed} test cases: "
+                      "a test name containing ';' is split by doctest_discover_tests")
+endif()
