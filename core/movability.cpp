@@ -226,9 +226,13 @@ Walk walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, Mov
       w.b.push_back(b);
       w.F.push_back(m.F);
     }
-    Eigen::Vector3d va = m.v_a, vb = m.v_b;
     const Eigen::Vector3d e = (b - a).normalized();
-    const Eigen::Vector3d vm = 0.5 * (va + vb) - 0.5 * (va + vb).dot(e) * e;  // normal part: |vm| = 1
+    // Sliding along itself does not move the line but does move the tool: accumulated over the
+    // steps it carried one end off Φ, so curved motions stopped early at the boundary and the
+    // tool's reach shrank at that end. The common axial part of the field is removed.
+    const double slide = 0.5 * (m.v_a + m.v_b).dot(e);
+    Eigen::Vector3d va = m.v_a - slide * e, vb = m.v_b - slide * e;
+    const Eigen::Vector3d vm = 0.5 * (va + vb);  // normal part: |vm| = 1
     // The eigenvector's sign is arbitrary: keep moving the way we went.
     const double sign = step == 0 ? double(direction) : (vm.dot(previous_vm) >= 0 ? 1.0 : -1.0);
     va *= sign;
