@@ -97,23 +97,85 @@ struct Seed {
   int vertex = -1;
 };
 
-// Sec. 4.1 over the whole surface: at a seed point, lines in `directions` tangent directions, offset
-// by ±r along the normal, each as long as the surface reaches along it; the most movable one.
-Seed best_line_at(const SurfaceIndex& surface, int v, const CoverOptions& o) {
+// Principal directions from the change of the vertex normals over the two-ring (dn = W dx in the
+// tangent plane, least squares). The least-curvature direction is where a flank tool's axis lies on
+// an envelope; the largest curvature 1/r, towards its centre, suggests the tool radius and side.
+struct Principal {
+  Eigen::Vector3d least = Eigen::Vector3d::Zero();
+  double radius = 0;  // 1 / |largest curvature|; 0: flat or unknown
+  int side = 1;       // the centre of curvature lies at p + side * radius * n
+  bool valid = false;
+};
+
+Principal principal_at(const SurfaceIndex& surface, const std::vector<std::vector<int>>& ring, int v,
+                       const Eigen::Vector3d& t1, const Eigen::Vector3d& t2) {
+  const auto& P = surface.mesh().vertices;
+  const auto& N = surface.normals();
+  std::vector<int> near = ring[size_t(v)];
+  for (int w : ring[size_t(v)]) near.insert(near.end(), ring[size_t(w)].begin(), ring[size_t(w)].end());
+  std::sort(near.begin(), near.end());
+  near.erase(std::unique(near.begin(), near.end()), near.end());
+  Principal out;
+  Eigen::Matrix2d XtX = Eigen::Matrix2d::Zero(), XtY = Eigen::Matrix2d::Zero();
+  int used = 0;
+  for (int w : near) {
+    if (w == v) continue;
+    const Eigen::Vector3d dx = P[size_t(w)] - P[size_t(v)], dn = N[size_t(w)] - N[size_t(v)];
+    const Eigen::Vector2d x(dx.dot(t1), dx.dot(t2)), y(dn.dot(t1), dn.dot(t2));
+    XtX += x * x.transpose();
+    XtY += x * y.transpose();
+    ++used;
+  }
+  if (used < 5 || XtX.determinant() <= 1e-18) return out;
+  Eigen::Matrix2d W = XtX.ldlt().solve(XtY);
+  W = 0.5 * (W + W.transpose()).eval();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(W);
+  const int lo = std::abs(es.eigenvalues()[0]) <= std::abs(es.eigenvalues()[1]) ? 0 : 1;
+  out.least = (es.eigenvectors()(0, lo) * t1 + es.eigenvectors()(1, lo) * t2).normalized();
+  const double k_max = es.eigenvalues()[1 - lo];
+  if (std::abs(k_max) > 1e-9) {
+    out.radius = 1 / std::abs(k_max);
+    out.side = k_max > 0 ? -1 : 1;  // n(q) = (q - c)/R on a sphere: dn = +dx/R with the centre behind
+  }
+  out.valid = true;
+  return out;
+}
+
+// Sec. 4.1 over the whole surface: at a seed point, lines around the least-curvature direction,
+// offset along the normal by the candidate radii (and by the radius of curvature towards its
+// centre), each as long as the surface reaches along it; the most movable one.
+Seed best_line_at(const SurfaceIndex& surface, const std::vector<std::vector<int>>& ring, int v, const CoverOptions& o) {
   const Eigen::Vector3d p = surface.mesh().vertices[size_t(v)], n = surface.normals()[size_t(v)];
   Eigen::Index k;
   n.cwiseAbs().minCoeff(&k);
-  const Eigen::Vector3d t1 = n.cross(Eigen::Vector3d::Unit(k)).normalized(), t2 = n.cross(t1);
+  Eigen::Vector3d t1 = n.cross(Eigen::Vector3d::Unit(k)).normalized(), t2 = n.cross(t1);
+  const Principal pc = principal_at(surface, ring, v, t1, t2);
+  std::vector<std::pair<double, int>> offsets;  // radius, side
+  for (double r : o.radii) offsets.emplace_back(r, 1), offsets.emplace_back(r, -1);
+  if (pc.valid && pc.radius > 0.005 && pc.radius < 0.3) offsets.emplace_back(pc.radius, pc.side);
+  // Around the least-curvature direction (±30 degrees); without it, evenly over the half circle.
+  std::vector<Eigen::Vector3d> dirs;
+  if (pc.valid) {
+    t1 = pc.least;
+    t2 = n.cross(t1);
+    for (int dk = 0; dk < o.directions; ++dk) {
+      const double phi = o.directions == 1 ? 0.0 : (-30.0 + 60.0 * dk / (o.directions - 1)) * M_PI / 180;
+      dirs.push_back(std::cos(phi) * t1 + std::sin(phi) * t2);
+    }
+  } else {
+    for (int dk = 0; dk < o.directions; ++dk) {
+      const double phi = M_PI * dk / o.directions;
+      dirs.push_back(std::cos(phi) * t1 + std::sin(phi) * t2);
+    }
+  }
   Seed best;
   best.vertex = v;
   constexpr int reach_samples = 31;
   constexpr double reach = 0.75;  // half-length of the probe line (unit frame)
   const auto u_of = [&](int i) { return -reach + 2 * reach * i / (reach_samples - 1); };
-  for (int dk = 0; dk < o.directions; ++dk) {
-    const double phi = M_PI * dk / o.directions;
-    const Eigen::Vector3d d = std::cos(phi) * t1 + std::sin(phi) * t2;
-    for (double r : o.radii)
-      for (int side : {1, -1}) {
+  for (const Eigen::Vector3d& d : dirs)
+    for (const auto& [r, side] : offsets) {
+      {
         const Eigen::Vector3d c = p + side * r * n;
         const auto inside = [&](double u) { return !surface.closest(Eigen::Vector3d(c + u * d)).on_boundary; };
         std::vector<char> in(reach_samples);
@@ -277,6 +339,16 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
   std::vector<PatchFit> fits;
   std::vector<std::pair<double, double>> ranges;
   std::vector<double> gains;
+  std::vector<std::vector<int>> ring(nv);  // one-ring neighbours
+  for (const auto& f : m.faces)
+    for (int c = 0; c < 3; ++c) {
+      ring[size_t(f[size_t(c)])].push_back(f[size_t((c + 1) % 3)]);
+      ring[size_t(f[size_t(c)])].push_back(f[size_t((c + 2) % 3)]);
+    }
+  for (auto& r : ring) {
+    std::sort(r.begin(), r.end());
+    r.erase(std::unique(r.begin(), r.end()), r.end());
+  }
   std::vector<char> covered(nv, 0);
   std::vector<char> tried(nv, 0);  // seed vertices already used
   CoverProgress progress;
@@ -315,7 +387,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
     report("seeding");
     std::vector<Seed> seeds(points.size());
 #pragma omp parallel for schedule(dynamic, 1)
-    for (int k = 0; k < int(points.size()); ++k) seeds[size_t(k)] = best_line_at(surface, points[size_t(k)], o);
+    for (int k = 0; k < int(points.size()); ++k) seeds[size_t(k)] = best_line_at(surface, ring, points[size_t(k)], o);
     std::vector<size_t> order(seeds.size());
     std::iota(order.begin(), order.end(), size_t(0));
     std::stable_sort(order.begin(), order.end(), [&](size_t x, size_t y) { return seeds[x].rank < seeds[y].rank; });

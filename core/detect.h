@@ -17,7 +17,7 @@ struct CoverOptions {
   // Seeding (Sec. 4.1): seed points on a grid of this many cells across the surface's area, at each
   // `directions` line directions in the tangent plane, offset along ±normal by each radius.
   int seed_points = 48;
-  int directions = 8;
+  int directions = 5;
   std::vector<double> radii = {0.025, 0.05, 0.09};  // candidate tool radii (unit frame)
   int explored_seeds = 4;  // best-ranked seeds explored and propagated per patch
   int fitted_seeds = 2;    // of those, the trajectories sweeping the most uncovered area are fitted

@@ -208,6 +208,23 @@ Walk walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, Mov
   for (int step = 0; step < o.max_steps; ++step) {
     if (step > 0) {
       m = line_movability(surface, a, b, o.movability);
+      // Keep the rigid line centred on Φ: where the motion carries it towards an edge of Φ across
+      // its sweep (one end's footpoints on the boundary, the other end's not), slide it back along
+      // itself. Sliding is not a motion of the line, but without it a curved sweep leaves Φ over
+      // one end and stopped at the boundary half way (helix envelopes: half the surface).
+      const int n = o.movability.samples;
+      int lead = 0, trail = 0;
+      while (lead < n && m.footpoints[size_t(lead)].on_boundary) ++lead;
+      while (trail < n && m.footpoints[size_t(n - 1 - trail)].on_boundary) ++trail;
+      if (lead < n && lead != trail && (lead == 0 || trail == 0)) {
+        // At most half a step per step: drift towards an s-edge is slow, while crossing a t-edge
+        // obliquely must not push the line along itself.
+        const double want = 0.5 * (lead - trail) * L / (n - 1);
+        const Eigen::Vector3d shift = std::clamp(want, -0.5 * o.step, 0.5 * o.step) * (b - a) / L;
+        a += shift;
+        b += shift;
+        m = line_movability(surface, a, b, o.movability);
+      }
       if (m.boundary_samples > o.max_boundary_share * o.movability.samples) {
         w.stop = PropagationStop::Boundary;
         return w;
