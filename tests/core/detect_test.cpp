@@ -2,6 +2,7 @@
 
 #include <doctest/doctest.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 
 #include "core/envelope.h"
@@ -137,4 +138,33 @@ TEST_CASE("the union deviation keeps the deepest cut and names its patch") {
   CHECK(u.deviation[0] == 1e-5);
   CHECK(u.deviation[2] == -1e-5);
   CHECK(u.deviation[3] == -2e-5);
+}
+
+TEST_CASE("propagation from a line off the true axis runs to the surface boundary on every analytic motion") {
+  for (const char* kind : {"twist", "arc", "helix", "s-curve"}) {
+    CAPTURE(kind);
+    test::ExactEnvelope ex = test::exact_envelope(kind, cone_profile(6, 9), 40, 120);
+    const SurfaceIndex surface(ex.unit_mesh);
+    // The axis at t = 0.3, slid 10% of its length along itself and turned by 1 degree: a seed as
+    // detection finds it, not the exact axis.
+    const Eigen::Vector3d a = ex.frame.to_unit(ex.motion.a(0.3)), b = ex.frame.to_unit(ex.motion.b(0.3));
+    const Eigen::Vector3d e = (b - a).normalized(), slide = 0.1 * (b - a);
+    const Eigen::Vector3d turn = e.cross(Eigen::Vector3d::UnitZ()).normalized() * std::tan(M_PI / 180) * (b - a).norm();
+    const LineTrajectory tr = propagate_line(surface, a + slide, b + slide + turn);
+    CHECK(tr.stop_backward == PropagationStop::Boundary);
+    CHECK(tr.stop_forward == PropagationStop::Boundary);
+    // Both ends of the motion are reached: the nearest exact axis positions of the first and last line.
+    const auto t_of = [&](const Eigen::Vector3d& mid) {
+      double best_t = 0, best = 1e9;
+      for (int i = 0; i <= 400; ++i) {
+        const double t = i / 400.0;
+        const double d = (0.5 * (ex.frame.to_unit(ex.motion.a(t)) + ex.frame.to_unit(ex.motion.b(t))) - mid).norm();
+        if (d < best) best = d, best_t = t;
+      }
+      return best_t;
+    };
+    const double t0 = t_of(0.5 * (tr.a.front() + tr.b.front())), t1 = t_of(0.5 * (tr.a.back() + tr.b.back()));
+    CHECK(std::min(t0, t1) < 0.05);
+    CHECK(std::max(t0, t1) > 0.95);
+  }
 }
