@@ -9,7 +9,6 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <string>
 
 #include "core/blade.h"
@@ -53,7 +52,7 @@ void cover_mesh(const TriMesh& mesh_mm, double tol_mm, const std::string& what) 
              frame.length_to_mm(worst_overcut(d.deviation, ms)), to_string(d.stop), d.seeds_tried, seconds_since(t0));
   for (const auto& p : d.patches)
     fmt::print("  {}: own coverage {:.1f}%, first brought {:.1f}%, t in [{:.3f}, {:.3f}], eps {:.4f} mm\n", p.spec.name,
-               100 * p.fit.coverage, 100 * p.new_area, p.t_from, p.t_to, frame.length_to_mm(p.fit.fit.eps_opt.max));
+               100 * p.fit.coverage, 100 * p.new_area, p.fit.t_from, p.fit.t_to, frame.length_to_mm(p.fit.fit.eps_opt.max));
 }
 
 void envelopes(bool line_driven, const std::string& only) {
@@ -94,23 +93,12 @@ void envelopes(bool line_driven, const std::string& only) {
       } else {
         CoverOptions o;
         o.patch.tolerance = tol;
-        if (const char* mp = std::getenv("FLANKCAM_MAX_PATCHES")) o.max_patches = std::atoi(mp);
         const Detection d = detect_patches(surface, o, [&](const CoverProgress& p) {
           std::fprintf(stderr, "  [%6.1f s] %s: seed %d of %d, %d patches, coverage %.1f%%\n", seconds_since(t0),
                        p.stage.c_str(), p.seed, p.seeds, p.patches, 100 * p.coverage);
         });
         std::vector<const MachinedSurface*> ms;
         for (const auto& p : d.patches) ms.push_back(&p.fit.machined);
-        if (std::getenv("FLANKCAM_DEBUG_DETECT")) {
-          int nan_t[10] = {}, out_t[10] = {}, nan_s[10] = {}, out_s[10] = {};
-          for (size_t v = 0; v < d.deviation.size(); ++v) {
-            const int i = int(v) / 66, j = int(v) % 66;
-            const double x = d.deviation[v];
-            if (!std::isfinite(x)) ++nan_t[i * 10 / 200], ++nan_s[j * 10 / 66];
-            else if (std::abs(x) > tol) ++out_t[i * 10 / 200], ++out_s[j * 10 / 66];
-          }
-          for (int k = 0; k < 10; ++k) std::fprintf(stderr, "  decile %d: t nan %d out %d | s nan %d out %d\n", k, nan_t[k], out_t[k], nan_s[k], out_s[k]);
-        }
         cov = d.coverage;
         over = worst_overcut(d.deviation, ms);
         patches = int(d.patches.size());

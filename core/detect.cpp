@@ -3,8 +3,6 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -52,7 +50,7 @@ std::vector<AxisLine> lines_of(const Rails& rails, int count) {
   return out;
 }
 
-UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machined, size_t vertices, double) {
+UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machined, size_t vertices) {
   UnionDeviation u;
   u.owner.assign(vertices, -1);
   u.deviation.assign(vertices, std::numeric_limits<double>::quiet_NaN());
@@ -293,7 +291,6 @@ Candidate keep_uncovered(const SurfaceIndex& surface, const LineTrajectory& tr, 
 
 struct Fitted {
   PatchFit fit;
-  double t0 = 0, t1 = 1;
   double gain = 0;
   bool ok = false;
 };
@@ -312,17 +309,11 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   }
   out.fit = machine_and_trim(surface, std::move(out.fit), po);
   if (out.fit.gouges) return out;  // cannot be trimmed clean: rejected
-  out.t0 = out.fit.t_from;
-  out.t1 = out.fit.t_to;
   for (size_t v = 0; v < area.size(); ++v) {
     const double d = out.fit.machined.design_deviation[v];
     if (!covered[v] && std::isfinite(d) && std::abs(d) <= po.tolerance) out.gain += area[v];
   }
   out.ok = true;
-  if (std::getenv("FLANKCAM_DEBUG_DETECT"))
-    std::fprintf(stderr, "    candidate: %zu positions (%s/%s), eps %.2e -> %.2e, t [%.3f %.3f], coverage %.3f, gain %.3f, D0 %.4f\n",
-                 tr.a.size(), to_string(tr.stop_backward), to_string(tr.stop_forward), out.fit.fit.eps_ini.max,
-                 out.fit.fit.eps_opt.max, out.t0, out.t1, out.fit.coverage, out.gain, out.fit.fit.tool.D[0]);
   return out;
 }
 
@@ -337,7 +328,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
   const double tol = o.patch.tolerance;
   Detection out;
   std::vector<PatchFit> fits;
-  std::vector<std::pair<double, double>> ranges;
   std::vector<double> gains;
   std::vector<std::vector<int>> ring(nv);  // one-ring neighbours
   for (const auto& f : m.faces)
@@ -361,7 +351,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
   const auto update_union = [&]() {
     std::vector<const MachinedSurface*> ms;
     for (const PatchFit& f : fits) ms.push_back(&f.machined);
-    UnionDeviation u = union_deviation(ms, nv, tol);
+    UnionDeviation u = union_deviation(ms, nv);
     out.owner = std::move(u.owner);
     out.deviation = std::move(u.deviation);
     out.coverage = coverage(m, out.deviation, tol);
@@ -392,7 +382,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
     std::iota(order.begin(), order.end(), size_t(0));
     std::stable_sort(order.begin(), order.end(), [&](size_t x, size_t y) { return seeds[x].rank < seeds[y].rank; });
     std::vector<Candidate> candidates;
-    std::vector<int> candidate_seed;
     for (size_t r = 0; r < order.size() && int(candidates.size()) < o.explored_seeds; ++r) {
       const Seed& s = seeds[order[r]];
       if (!std::isfinite(s.F)) break;
@@ -402,13 +391,8 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
       const ExploredLine ex = explore_line(surface, s.line.a, s.line.b, o.patch.exploration);
       const LineTrajectory tr = propagate_line(surface, ex.a, ex.b, o.patch.propagation);
       Candidate c = keep_uncovered(surface, tr, ex.a, covered, area, o);
-      if (std::getenv("FLANKCAM_DEBUG_DETECT"))
-        std::fprintf(stderr, "    seed v%d F %.2e -> explored %.2e, L %.3f, propagated %zu (%s/%s), kept %zu, sweeps %.3f\n", s.vertex,
-                     s.F, ex.movability.F, (ex.b - ex.a).norm(), tr.a.size(), to_string(tr.stop_backward),
-                     to_string(tr.stop_forward), c.trajectory.a.size(), c.uncovered_swept);
       if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) continue;
       candidates.push_back(std::move(c));
-      candidate_seed.push_back(s.vertex);
     }
     std::vector<size_t> by_sweep(candidates.size());
     std::iota(by_sweep.begin(), by_sweep.end(), size_t(0));
@@ -431,7 +415,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
     }
     failures = 0;
     fits.push_back(std::move(best.fit));
-    ranges.emplace_back(best.t0, best.t1);
     gains.push_back(best.gain);
     update_union();
     report("patch accepted");
@@ -467,8 +450,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
     d.spec.rail = 0;
     d.spec.length = fits[p].fit.rails.length;
     d.fit = std::move(fits[p]);
-    d.t_from = ranges[p].first;
-    d.t_to = ranges[p].second;
     d.new_area = gains[p];
     out.patches.push_back(std::move(d));
   }

@@ -39,8 +39,7 @@ struct CoverProgress {
 
 struct DetectedPatch {
   PatchSpec spec;            // name auto-k, init: lines, rail 0: re-running it reproduces the patch
-  PatchFit fit;              // the trimmed fit with its machined surface
-  double t_from = 0, t_to = 1;  // the part of the optimised motion kept (trimmed where it gouges Φ)
+  PatchFit fit;              // the fit trimmed in t where it gouged Φ (fit.t_from, fit.t_to), its machined surface
   double new_area = 0;       // share of Φ's area this patch brought within tolerance first
 };
 
@@ -64,8 +63,7 @@ struct UnionDeviation {
   std::vector<int> owner;
   std::vector<double> deviation;
 };
-[[nodiscard]] UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machined, size_t vertices,
-                                             double tolerance);
+[[nodiscard]] UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machined, size_t vertices);
 
 // Lines through the rails at `count` uniform t (unit frame), an `init: lines` description of the motion.
 [[nodiscard]] std::vector<AxisLine> lines_of(const Rails& rails, int count);

@@ -133,7 +133,7 @@ TEST_CASE("the union deviation keeps the deepest cut and names its patch") {
   const double nan = std::nan("");
   a.design_deviation = {1e-5, nan, 3e-4, -2e-5};
   b.design_deviation = {5e-5, 2e-5, -1e-5, nan};
-  const UnionDeviation u = union_deviation({&a, &b}, 4, 1e-4);
+  const UnionDeviation u = union_deviation({&a, &b}, 4);
   CHECK(u.owner == std::vector<int>{0, 1, 1, 0});
   CHECK(u.deviation[0] == 1e-5);
   CHECK(u.deviation[2] == -1e-5);
