@@ -62,6 +62,9 @@ std::pair<double, double> ungouged_range(const MachinedSurface& ms, double toler
       const double d = ms.omega_deviation[size_t(i) * n_s + j];
       if (std::isfinite(d) && d < -tolerance) ok[size_t(i)] = 0;
     }
+  // Φ's vertices below Ω (measured from Φ's side) mark the row of their closest point too.
+  for (size_t v = 0; v < ms.design_deviation.size(); ++v)
+    if (ms.design_deviation[v] < -tolerance && ms.design_row[v] >= 0) ok[size_t(ms.design_row[v])] = 0;
   int best_lo = 0, best_len = 0;
   for (int i = 0; i < n_t;) {
     if (!ok[size_t(i)]) {

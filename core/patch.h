@@ -58,11 +58,12 @@ struct PatchFit {
 // run of envelope rows that do not gouge Φ beyond the tolerance, and the coverage. Used by fit_patch.
 [[nodiscard]] PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit fit, const PatchOptions& options);
 
-// The longest run of Ω's rows (t) without a point below Φ by more than `tolerance`, as [t0, t1]
-// of the machined motion; {0, 0} when no two consecutive rows are clean.
 // The rails restricted to [t0, t1], reparametrised to [0, 1] (same control point count).
 [[nodiscard]] Rails trimmed(const Rails& rails, double t0, double t1);
 
+// The longest run of Ω's rows (t) without a point below Φ by more than `tolerance` (an Ω vertex, or
+// a Φ vertex whose closest Ω point lies in the row), as [t0, t1] of the machined motion; {0, 0} when
+// no two consecutive rows are clean.
 [[nodiscard]] std::pair<double, double> ungouged_range(const MachinedSurface& machined, double tolerance);
 
 }  // namespace flankcam
