@@ -403,8 +403,25 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
       // Enough already.
       if (best.ok && out.coverage + best.gain >= o.coverage) break;
       report("fitting candidate " + std::to_string(r + 1));
-      Fitted f = fit_candidate(surface, candidates[by_sweep[r]].trajectory, covered, area, o);
+      const LineTrajectory& tr = candidates[by_sweep[r]].trajectory;
+      Fitted f = fit_candidate(surface, tr, covered, area, o);
       ++out.seeds_tried;
+      // A sweep too long for one envelope within tolerance (it gouges all along, or brings little):
+      // its halves are fitted instead (shorter motions bend less).
+      const size_t half = tr.a.size() / 2;
+      if ((!f.ok || f.gain < 0.02) && half >= size_t(2 * o.patch.fit.rail_control_points))
+        for (int piece = 0; piece < 2; ++piece) {
+          LineTrajectory part;
+          const size_t from = piece == 0 ? 0 : half, to = piece == 0 ? half + half / 10 : tr.a.size();
+          const size_t lo = piece == 0 ? from : from - half / 10;  // a small overlap between the halves
+          part.a.assign(tr.a.begin() + long(lo), tr.a.begin() + long(to));
+          part.b.assign(tr.b.begin() + long(lo), tr.b.begin() + long(to));
+          part.F.assign(tr.F.begin() + long(lo), tr.F.begin() + long(to));
+          report("fitting candidate " + std::to_string(r + 1) + ", half " + std::to_string(piece + 1));
+          Fitted h = fit_candidate(surface, part, covered, area, o);
+          ++out.seeds_tried;
+          if (h.ok && (!f.ok || h.gain > f.gain)) f = std::move(h);
+        }
       if (f.ok && f.gain > best.gain) best = std::move(f);
     }
     // A patch must bring a real share of the surface (0.5%) within tolerance.
