@@ -86,6 +86,7 @@ void envelopes(bool line_driven, const std::string& only) {
         spec.lines = {{mid - 0.5 * L * e2, mid + 0.5 * L * e2}};
         PatchOptions po;
         po.tolerance = tol;
+        po.trim_gouges = true;
         const PatchFit f = fit_patch(surface, spec, po);
         cov = f.coverage;
         over = worst_overcut(f.machined.design_deviation, {&f.machined});

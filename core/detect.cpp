@@ -298,7 +298,8 @@ struct Fitted {
 Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, const std::vector<char>& covered,
                      const std::vector<double>& area, const CoverOptions& o) {
   Fitted out;
-  const PatchOptions& po = o.patch;
+  PatchOptions po = o.patch;
+  po.trim_gouges = true;  // neighbours must not overcut each other's region
   if (tr.a.size() < size_t(po.fit.rail_control_points)) return out;
   try {
     out.fit.trajectory = tr;

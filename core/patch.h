@@ -33,7 +33,8 @@ struct PatchOptions {
   double tolerance = 1e-4;  // for coverage (unit frame)
   // Trim the optimised motion in t to the longest stretch where the tool does not gouge Φ (Ω below Φ
   // by more than `tolerance`): an overcut cannot be repaired, an undercut can by a neighbour.
-  bool trim_gouges = true;
+  // Detection always trims; off by default here so hand-placed jobs keep their motion.
+  bool trim_gouges = false;
   // Stage messages ("exploring the line", ...) for progress output; may be empty.
   std::function<void(const std::string&)> on_stage;
 };

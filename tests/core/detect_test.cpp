@@ -63,6 +63,7 @@ TEST_CASE("auto detection covers an exact envelope with one patch within 1e-4 of
     // The written-out lines reproduce the patch as an init: lines patch.
     PatchOptions po;
     po.tolerance = 1e-4;
+    po.trim_gouges = true;
     const PatchFit again = fit_patch(surface, p.spec, po);
     CHECK(again.coverage >= 0.9);
   }
