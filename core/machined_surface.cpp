@@ -57,6 +57,7 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
     out.omega_deviation[k] = (out.omega.mesh.vertices[k] - f.point).dot(out.tool_side * f.normal);
   }
   out.design_deviation.assign(design.mesh().vertices.size(), nan);
+  out.design_row.assign(design.mesh().vertices.size(), -1);
   if (out.omega.mesh.faces.empty()) return out;
   const SurfaceIndex omega_index(out.omega.mesh);
   const auto on_omega = omega_index.closest(design.mesh().vertices);
@@ -64,6 +65,7 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
   for (size_t v = 0; v < on_omega.size(); ++v) {
     if (on_omega[v].on_boundary) continue;  // Ω does not reach this vertex
     out.design_deviation[v] = (on_omega[v].point - design.mesh().vertices[v]).dot(out.tool_side * normals[v]);
+    out.design_row[v] = out.omega.mesh.faces[size_t(on_omega[v].face)][0] / out.omega.n_s;
   }
   return out;
 }

@@ -22,6 +22,7 @@ struct MachinedSurface {
                                           // normal (undercut > 0, overcut < 0); NaN beyond Φ
   std::vector<double> design_deviation;   // per Φ vertex: the same measured from Ω; NaN where Ω does
                                           // not cover the vertex
+  std::vector<int> design_row;            // per Φ vertex: the Ω grid row (t index) of its closest point; -1: none
 };
 
 // Deviations are in the frame of `design` (unit frame in the fitting).

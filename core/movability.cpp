@@ -210,6 +210,23 @@ Walk walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, Mov
   for (int step = 0; step < o.max_steps; ++step) {
     if (step > 0) {
       m = line_movability(surface, a, b, o.movability);
+      // Keep the rigid line centred on Φ: where the motion carries it towards an edge of Φ across
+      // its sweep (one end's footpoints on the boundary, the other end's not), slide it back along
+      // itself. Sliding is not a motion of the line, but without it a curved sweep leaves Φ over
+      // one end and stopped at the boundary half way (helix envelopes: half the surface).
+      const int n = o.movability.samples;
+      int lead = 0, trail = 0;
+      while (lead < n && m.footpoints[size_t(lead)].on_boundary) ++lead;
+      while (trail < n && m.footpoints[size_t(n - 1 - trail)].on_boundary) ++trail;
+      if (lead < n && lead != trail && (lead == 0 || trail == 0)) {
+        // At most half a step per step: drift towards an s-edge is slow, while crossing a t-edge
+        // obliquely must not push the line along itself.
+        const double want = 0.5 * (lead - trail) * L / (n - 1);
+        const Eigen::Vector3d shift = std::clamp(want, -0.5 * o.step, 0.5 * o.step) * (b - a) / L;
+        a += shift;
+        b += shift;
+        m = line_movability(surface, a, b, o.movability);
+      }
       if (m.boundary_samples > o.max_boundary_share * o.movability.samples) {
         w.stop = PropagationStop::Boundary;
         return w;
@@ -228,9 +245,13 @@ Walk walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, Mov
       w.b.push_back(b);
       w.F.push_back(m.F);
     }
-    Eigen::Vector3d va = m.v_a, vb = m.v_b;
     const Eigen::Vector3d e = (b - a).normalized();
-    const Eigen::Vector3d vm = 0.5 * (va + vb) - 0.5 * (va + vb).dot(e) * e;  // normal part: |vm| = 1
+    // Sliding along itself does not move the line but does move the tool: accumulated over the
+    // steps it carried one end off Φ, so curved motions stopped early at the boundary and the
+    // tool's reach shrank at that end. The common axial part of the field is removed.
+    const double slide = 0.5 * (m.v_a + m.v_b).dot(e);
+    Eigen::Vector3d va = m.v_a - slide * e, vb = m.v_b - slide * e;
+    const Eigen::Vector3d vm = 0.5 * (va + vb);  // normal part: |vm| = 1
     // The eigenvector's sign is arbitrary: keep moving the way we went.
     const double sign = step == 0 ? double(direction) : (vm.dot(previous_vm) >= 0 ? 1.0 : -1.0);
     va *= sign;

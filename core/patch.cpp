@@ -1,6 +1,7 @@
 #include "core/patch.h"
 
 #include <chrono>
+#include <cmath>
 
 #include "core/errors.h"
 
@@ -27,6 +28,7 @@ PatchFit fit_patch(const SurfaceIndex& surface, const PatchSpec& spec, const Pat
       throw InputError(where + "line " + std::to_string(k) + " has zero length");
   if (spec.rail != 0 && spec.rail != 1) throw InputError(where + "rail: must be 0 (tool tip, a) or 1 (b)");
 
+  if (!(o.tolerance > 0)) throw InputError(where + "tolerance: must be positive");
   PatchFit out;
   const auto t0 = std::chrono::steady_clock::now();
   try {
@@ -49,9 +51,66 @@ PatchFit fit_patch(const SurfaceIndex& surface, const PatchSpec& spec, const Pat
     throw InputError(where + e.what());
   }
   stage("machined envelope and deviation");
+  return machine_and_trim(surface, std::move(out), o);
+}
+
+std::pair<double, double> ungouged_range(const MachinedSurface& ms, double tolerance) {
+  const int n_t = ms.omega.n_t, n_s = ms.omega.n_s;
+  std::vector<char> ok(size_t(n_t), 1);
+  for (int i = 0; i < n_t; ++i)
+    for (int j = 0; j < n_s; ++j) {
+      const double d = ms.omega_deviation[size_t(i) * n_s + j];
+      if (std::isfinite(d) && d < -tolerance) ok[size_t(i)] = 0;
+    }
+  // Φ's vertices below Ω (measured from Φ's side) mark the row of their closest point too.
+  for (size_t v = 0; v < ms.design_deviation.size(); ++v)
+    if (ms.design_deviation[v] < -tolerance && ms.design_row[v] >= 0) ok[size_t(ms.design_row[v])] = 0;
+  int best_lo = 0, best_len = 0;
+  for (int i = 0; i < n_t;) {
+    if (!ok[size_t(i)]) {
+      ++i;
+      continue;
+    }
+    int j = i;
+    while (j < n_t && ok[size_t(j)]) ++j;
+    if (j - i > best_len) best_len = j - i, best_lo = i;
+    i = j;
+  }
+  if (best_len < 2) return {0.0, 0.0};
+  return {double(best_lo) / (n_t - 1), double(best_lo + best_len - 1) / (n_t - 1)};
+}
+
+PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const PatchOptions& o) {
   out.machined = machined_surface(surface, out.fit.rails, out.fit.tool, o.machined);
+  out.t_from = 0;
+  out.t_to = 1;
+  // Trimmed rails are sampled anew, so the ends are checked again (a few rounds).
+  for (int round = 0; o.trim_gouges && round < 3; ++round) {
+    const auto [t0, t1] = ungouged_range(out.machined, o.tolerance);
+    if (t0 == 0.0 && t1 == 1.0) break;
+    if (!(t1 - t0 > 0.02)) break;  // gouges nearly everywhere: left as it is, reported by `gouges`
+    const double w = out.t_to - out.t_from;
+    out.t_to = out.t_from + w * t1;
+    out.t_from += w * t0;
+    out.fit.rails = trimmed(out.fit.rails, t0, t1);
+    out.machined = machined_surface(surface, out.fit.rails, out.fit.tool, o.machined);
+  }
+  const auto [t0, t1] = ungouged_range(out.machined, o.tolerance);
+  out.gouges = !(t0 == 0.0 && t1 == 1.0);
   out.coverage = coverage(surface.mesh(), out.machined.design_deviation, o.tolerance);
   return out;
+}
+
+Rails trimmed(const Rails& r, double t0, double t1) {
+  const int samples = std::max(8 * r.a.size(), 200);
+  Eigen::MatrixXd A(samples, 3), B(samples, 3);
+  const std::vector<double> ts = uniform_parameters(samples);
+  for (int i = 0; i < samples; ++i) {
+    const double t = t0 + (t1 - t0) * ts[size_t(i)];
+    A.row(i) = r.a.point(t).transpose();
+    B.row(i) = r.b.point(t).transpose();
+  }
+  return {fit_bspline(A, ts, r.a.size()), fit_bspline(B, ts, r.b.size()), r.length};
 }
 
 }  // namespace flankcam

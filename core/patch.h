@@ -5,6 +5,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/fitting.h"
@@ -30,6 +31,10 @@ struct PatchOptions {
   PropagationOptions propagation;
   MachinedSurfaceOptions machined;
   double tolerance = 1e-4;  // for coverage (unit frame)
+  // Trim the optimised motion in t to the longest stretch where the tool does not gouge Φ (Ω below Φ
+  // by more than `tolerance`): an overcut cannot be repaired, an undercut can by a neighbour.
+  // Detection always trims; off by default here so hand-placed jobs keep their motion.
+  bool trim_gouges = false;
   // Stage messages ("exploring the line", ...) for progress output; may be empty.
   std::function<void(const std::string&)> on_stage;
 };
@@ -40,6 +45,8 @@ struct PatchFit {
   MachinedSurface machined;
   double coverage = 0;                      // share of Φ's area within the tolerance
   double seconds_init = 0, seconds_opt = 0;  // wall clock
+  double t_from = 0, t_to = 1;              // the part of the optimised motion kept (trim_gouges)
+  bool gouges = false;                      // Ω still lies below Φ beyond the tolerance somewhere
   std::optional<ExploredLine> explored;     // line-driven only
   std::optional<LineTrajectory> trajectory;  // line-driven only
 };
@@ -47,5 +54,17 @@ struct PatchFit {
 // Throws InputError naming the patch when its lines are unusable (too few, zero length,
 // a line that cannot be propagated, a motion that is not over the surface).
 [[nodiscard]] PatchFit fit_patch(const SurfaceIndex& surface, const PatchSpec& spec, const PatchOptions& options);
+
+// The machined surface of `fit.fit`, then (with trim_gouges) the rails trimmed in t to the longest
+// run of envelope rows that do not gouge Φ beyond the tolerance, and the coverage. Used by fit_patch.
+[[nodiscard]] PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit fit, const PatchOptions& options);
+
+// The rails restricted to [t0, t1], reparametrised to [0, 1] (same control point count).
+[[nodiscard]] Rails trimmed(const Rails& rails, double t0, double t1);
+
+// The longest run of Ω's rows (t) without a point below Φ by more than `tolerance` (an Ω vertex, or
+// a Φ vertex whose closest Ω point lies in the row), as [t0, t1] of the machined motion; {0, 0} when
+// no two consecutive rows are clean.
+[[nodiscard]] std::pair<double, double> ungouged_range(const MachinedSurface& machined, double tolerance);
 
 }  // namespace flankcam

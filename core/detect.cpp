@@ -1,0 +1,482 @@
+#include "core/detect.h"
+
+#include <Eigen/Dense>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <tuple>
+
+#include "core/errors.h"
+
+namespace flankcam {
+
+std::string CoverOptions::validate() const {
+  if (!(coverage > 0 && coverage <= 1)) return "cover.coverage: must be in (0, 1]";
+  if (max_patches < 1) return "cover.max_patches: at least 1";
+  if (seed_points < 1) return "cover.seed_points: at least 1";
+  if (directions < 1) return "cover.directions: at least 1";
+  if (radii.empty()) return "cover.radii: at least one candidate radius";
+  for (double r : radii)
+    if (!(r > 0) || !std::isfinite(r)) return "cover.radii: must be positive";
+  if (explored_seeds < 1) return "cover.explored_seeds: at least 1";
+  if (fitted_seeds < 1 || fitted_seeds > explored_seeds) return "cover.fitted_seeds: 1 .. explored_seeds";
+  if (!(band >= 0) || !std::isfinite(band)) return "cover.band: must be >= 0";
+  if (lines < 2) return "cover.lines: at least 2";
+  if (!(patch.tolerance > 0)) return "tolerance: must be positive";
+  if (auto e = patch.fit.validate(); !e.empty()) return e;
+  if (auto e = patch.exploration.validate(); !e.empty()) return "exploration." + e;
+  if (auto e = patch.propagation.validate(); !e.empty()) return "propagation." + e;
+  if (auto e = patch.machined.validate(); !e.empty()) return e;
+  return {};
+}
+
+const char* to_string(CoverStop s) {
+  switch (s) {
+    case CoverStop::Coverage: return "coverage reached";
+    case CoverStop::MaxPatches: return "max_patches reached";
+    case CoverStop::NoProgress: return "no further patch adds coverage";
+  }
+  return "?";
+}
+
+std::vector<AxisLine> lines_of(const Rails& rails, int count) {
+  std::vector<AxisLine> out;
+  for (int k = 0; k < count; ++k) {
+    const double t = double(k) / (count - 1);
+    out.push_back({rails.a.point(t), rails.b.point(t)});
+  }
+  return out;
+}
+
+UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machined, size_t vertices) {
+  UnionDeviation u;
+  u.owner.assign(vertices, -1);
+  u.deviation.assign(vertices, std::numeric_limits<double>::quiet_NaN());
+  // The tools remove material one after the other: what is left is the deepest cut (smallest signed
+  // deviation, undercut > 0), and the patch that made it machines the vertex.
+  for (size_t p = 0; p < machined.size(); ++p)
+    for (size_t v = 0; v < vertices; ++v) {
+      const double d = machined[p]->design_deviation[v];
+      if (!std::isfinite(d)) continue;
+      if (u.owner[v] < 0 || d < u.deviation[v]) {
+        u.deviation[v] = d;
+        u.owner[v] = int(p);
+      }
+    }
+  return u;
+}
+
+namespace {
+
+constexpr double kMovableF = 1e-8;
+
+std::vector<double> vertex_areas(const TriMesh& m) {
+  std::vector<double> area(m.vertices.size(), 0.0);
+  for (int f = 0; f < int(m.faces.size()); ++f)
+    for (int v : m.faces[size_t(f)]) area[size_t(v)] += face_area(m, f) / 3;
+  const double total = std::accumulate(area.begin(), area.end(), 0.0);
+  for (double& a : area) a /= total > 0 ? total : 1;
+  return area;
+}
+
+// The corner of the footpoint's face nearest to it.
+int nearest_corner(const TriMesh& m, const Footpoint& f) {
+  Eigen::Index k;
+  f.barycentric.maxCoeff(&k);
+  return m.faces[size_t(f.face)][size_t(k)];
+}
+
+struct Seed {
+  AxisLine line;
+  double F = std::numeric_limits<double>::infinity();
+  double rank = std::numeric_limits<double>::infinity();
+  int vertex = -1;
+};
+
+// Principal directions from the change of the vertex normals over the two-ring (dn = W dx in the
+// tangent plane, least squares). The least-curvature direction is where a flank tool's axis lies on
+// an envelope; the largest curvature 1/r, towards its centre, suggests the tool radius and side.
+struct Principal {
+  Eigen::Vector3d least = Eigen::Vector3d::Zero();
+  double radius = 0;  // 1 / |largest curvature|; 0: flat or unknown
+  int side = 1;       // the centre of curvature lies at p + side * radius * n
+  bool valid = false;
+};
+
+Principal principal_at(const SurfaceIndex& surface, const std::vector<std::vector<int>>& ring, int v,
+                       const Eigen::Vector3d& t1, const Eigen::Vector3d& t2) {
+  const auto& P = surface.mesh().vertices;
+  const auto& N = surface.normals();
+  std::vector<int> near = ring[size_t(v)];
+  for (int w : ring[size_t(v)]) near.insert(near.end(), ring[size_t(w)].begin(), ring[size_t(w)].end());
+  std::sort(near.begin(), near.end());
+  near.erase(std::unique(near.begin(), near.end()), near.end());
+  Principal out;
+  Eigen::Matrix2d XtX = Eigen::Matrix2d::Zero(), XtY = Eigen::Matrix2d::Zero();
+  int used = 0;
+  for (int w : near) {
+    if (w == v) continue;
+    const Eigen::Vector3d dx = P[size_t(w)] - P[size_t(v)], dn = N[size_t(w)] - N[size_t(v)];
+    const Eigen::Vector2d x(dx.dot(t1), dx.dot(t2)), y(dn.dot(t1), dn.dot(t2));
+    XtX += x * x.transpose();
+    XtY += x * y.transpose();
+    ++used;
+  }
+  if (used < 5 || XtX.determinant() <= 1e-18) return out;
+  Eigen::Matrix2d W = XtX.ldlt().solve(XtY);
+  W = 0.5 * (W + W.transpose()).eval();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(W);
+  const int lo = std::abs(es.eigenvalues()[0]) <= std::abs(es.eigenvalues()[1]) ? 0 : 1;
+  out.least = (es.eigenvectors()(0, lo) * t1 + es.eigenvectors()(1, lo) * t2).normalized();
+  const double k_max = es.eigenvalues()[1 - lo];
+  if (std::abs(k_max) > 1e-9) {
+    out.radius = 1 / std::abs(k_max);
+    out.side = k_max > 0 ? -1 : 1;  // n(q) = (q - c)/R on a sphere: dn = +dx/R with the centre behind
+  }
+  out.valid = true;
+  return out;
+}
+
+// Sec. 4.1 over the whole surface: at a seed point, lines around the least-curvature direction,
+// offset along the normal by the candidate radii (and by the radius of curvature towards its
+// centre), each as long as the surface reaches along it; the most movable one.
+Seed best_line_at(const SurfaceIndex& surface, const std::vector<std::vector<int>>& ring, int v, const CoverOptions& o) {
+  const Eigen::Vector3d p = surface.mesh().vertices[size_t(v)], n = surface.normals()[size_t(v)];
+  Eigen::Index k;
+  n.cwiseAbs().minCoeff(&k);
+  Eigen::Vector3d t1 = n.cross(Eigen::Vector3d::Unit(k)).normalized(), t2 = n.cross(t1);
+  const Principal pc = principal_at(surface, ring, v, t1, t2);
+  std::vector<std::pair<double, int>> offsets;  // radius, side
+  for (double r : o.radii) offsets.emplace_back(r, 1), offsets.emplace_back(r, -1);
+  if (pc.valid && pc.radius > 0.005 && pc.radius < 0.3) offsets.emplace_back(pc.radius, pc.side);
+  // Around the least-curvature direction (±30 degrees); without it, evenly over the half circle.
+  std::vector<Eigen::Vector3d> dirs;
+  if (pc.valid) {
+    t1 = pc.least;
+    t2 = n.cross(t1);
+    for (int dk = 0; dk < o.directions; ++dk) {
+      const double phi = o.directions == 1 ? 0.0 : (-30.0 + 60.0 * dk / (o.directions - 1)) * M_PI / 180;
+      dirs.push_back(std::cos(phi) * t1 + std::sin(phi) * t2);
+    }
+  } else {
+    for (int dk = 0; dk < o.directions; ++dk) {
+      const double phi = M_PI * dk / o.directions;
+      dirs.push_back(std::cos(phi) * t1 + std::sin(phi) * t2);
+    }
+  }
+  Seed best;
+  best.vertex = v;
+  constexpr int reach_samples = 31;
+  constexpr double reach = 0.75;  // half-length of the probe line (unit frame)
+  const auto u_of = [&](int i) { return -reach + 2 * reach * i / (reach_samples - 1); };
+  for (const Eigen::Vector3d& d : dirs)
+    for (const auto& [r, side] : offsets) {
+      {
+        const Eigen::Vector3d c = p + side * r * n;
+        const auto inside = [&](double u) { return !surface.closest(Eigen::Vector3d(c + u * d)).on_boundary; };
+        std::vector<char> in(reach_samples);
+        for (int i = 0; i < reach_samples; ++i) in[size_t(i)] = inside(u_of(i));
+        const int mid = reach_samples / 2;
+        if (!in[size_t(mid)]) continue;
+        int lo = mid, hi = mid;
+        while (lo > 0 && in[size_t(lo - 1)]) --lo;
+        while (hi + 1 < reach_samples && in[size_t(hi + 1)]) ++hi;
+        if (hi - lo < 4) continue;
+        // The line reaches as far as Φ does along it (bisection to the boundary, 1% overhang): a tool
+        // shorter than Φ's width leaves strips at its ends.
+        const auto edge = [&](double u_in, double u_out) {
+          for (int it = 0; it < 8; ++it) {
+            const double u = 0.5 * (u_in + u_out);
+            (inside(u) ? u_in : u_out) = u;
+          }
+          return u_in;
+        };
+        double u0 = lo > 0 ? edge(u_of(lo), u_of(lo - 1)) : u_of(lo);
+        double u1 = hi + 1 < reach_samples ? edge(u_of(hi), u_of(hi + 1)) : u_of(hi);
+        const double overhang = 0.01 * (u1 - u0);
+        u0 -= overhang;
+        u1 += overhang;
+        const AxisLine line{c + u0 * d, c + u1 * d};
+        const Movability m = line_movability(surface, line.a, line.b, o.patch.exploration.movability);
+        if (!m.movable || m.used_samples * 5 < 4 * o.patch.exploration.movability.samples) continue;
+        // Below ~1e-8 (angles ~1e-4 rad) F_l is tessellation noise: among such lines the longest
+        // reaches furthest across Φ, so the rank is F_l floored there, per unit length.
+        const double rank = std::max(m.F, kMovableF) / (u1 - u0);
+        if (rank < best.rank) {
+          best.rank = rank;
+          best.F = m.F;
+          best.line = line;
+        }
+      }
+  }
+  return best;
+}
+
+// Seed points: per cell of a grid whose spacing follows Φ's area, the lowest-index vertex that is
+// uncovered and not on the boundary.
+std::vector<int> seed_points(const SurfaceIndex& surface, const std::vector<char>& covered, const CoverOptions& o) {
+  const TriMesh& m = surface.mesh();
+  const double h = std::sqrt(surface_area(m) / o.seed_points);
+  const auto& boundary = surface.topology().boundary_vertex;
+  std::map<std::tuple<long, long, long>, int> cells;
+  for (int v = 0; v < int(m.vertices.size()); ++v) {
+    if (covered[size_t(v)] || boundary[size_t(v)]) continue;
+    const Eigen::Vector3d& x = m.vertices[size_t(v)];
+    cells.emplace(std::make_tuple(long(std::floor(x.x() / h)), long(std::floor(x.y() / h)), long(std::floor(x.z() / h))), v);
+  }
+  std::vector<int> out;
+  for (const auto& [cell, v] : cells) out.push_back(v);
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+struct Candidate {
+  LineTrajectory trajectory;
+  double uncovered_swept = 0;  // share of Φ's area, uncovered, under the kept trajectory
+};
+
+// Keeps the run of the trajectory that sweeps uncovered surface around the seed position, plus
+// `band` of arc length into covered surface on each side (the overlap with the neighbours).
+Candidate keep_uncovered(const SurfaceIndex& surface, const LineTrajectory& tr, const Eigen::Vector3d& seed_a,
+                         const std::vector<char>& covered, const std::vector<double>& area, const CoverOptions& o) {
+  const TriMesh& m = surface.mesh();
+  const int n = int(tr.a.size());
+  constexpr int per_line = 9;
+  std::vector<Eigen::Vector3d> pts;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < per_line; ++j) {
+      const double s = (j + 0.5) / per_line;
+      pts.push_back((1 - s) * tr.a[size_t(i)] + s * tr.b[size_t(i)]);
+    }
+  const auto fps = surface.closest(pts);
+  std::vector<char> pos_covered(size_t(n), 0);
+  for (int i = 0; i < n; ++i) {
+    int inside = 0, cov = 0;
+    for (int j = 0; j < per_line; ++j) {
+      const Footpoint& f = fps[size_t(i * per_line + j)];
+      if (f.on_boundary) continue;
+      ++inside;
+      cov += covered[size_t(nearest_corner(m, f))];
+    }
+    pos_covered[size_t(i)] = inside == 0 || cov * 5 >= inside * 4;
+  }
+  int start = 0;
+  double best = std::numeric_limits<double>::infinity();
+  for (int i = 0; i < n; ++i)
+    if ((tr.a[size_t(i)] - seed_a).norm() < best) best = (tr.a[size_t(i)] - seed_a).norm(), start = i;
+  int lo = start, hi = start;
+  while (lo > 0 && !pos_covered[size_t(lo - 1)]) --lo;
+  while (hi + 1 < n && !pos_covered[size_t(hi + 1)]) ++hi;
+  const auto mid = [&](int i) { return Eigen::Vector3d(0.5 * (tr.a[size_t(i)] + tr.b[size_t(i)])); };
+  for (double run = 0; lo > 0 && run < o.band; --lo) run += (mid(lo) - mid(lo - 1)).norm();
+  for (double run = 0; hi + 1 < n && run < o.band; ++hi) run += (mid(hi + 1) - mid(hi)).norm();
+  Candidate c;
+  c.trajectory.stop_backward = tr.stop_backward;
+  c.trajectory.stop_forward = tr.stop_forward;
+  c.trajectory.a.assign(tr.a.begin() + lo, tr.a.begin() + hi + 1);
+  c.trajectory.b.assign(tr.b.begin() + lo, tr.b.begin() + hi + 1);
+  c.trajectory.F.assign(tr.F.begin() + lo, tr.F.begin() + hi + 1);
+  std::vector<char> swept(m.vertices.size(), 0);
+  for (int i = lo; i <= hi; ++i)
+    for (int j = 0; j < per_line; ++j) {
+      const Footpoint& f = fps[size_t(i * per_line + j)];
+      if (!f.on_boundary) swept[size_t(nearest_corner(m, f))] = 1;
+    }
+  for (size_t v = 0; v < swept.size(); ++v)
+    if (swept[v] && !covered[v]) c.uncovered_swept += area[v];
+  return c;
+}
+
+struct Fitted {
+  PatchFit fit;
+  double gain = 0;
+  bool ok = false;
+};
+
+Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, const std::vector<char>& covered,
+                     const std::vector<double>& area, const CoverOptions& o) {
+  Fitted out;
+  PatchOptions po = o.patch;
+  po.trim_gouges = true;  // neighbours must not overcut each other's region
+  if (tr.a.size() < size_t(po.fit.rail_control_points)) return out;
+  try {
+    out.fit.trajectory = tr;
+    out.fit.initial = rails_from_trajectory(tr, po.fit);
+    out.fit.fit = optimize_motion(surface, out.fit.initial, po.fit);
+  } catch (const InputError&) {
+    return out;  // the motion left the surface: not a patch
+  }
+  out.fit = machine_and_trim(surface, std::move(out.fit), po);
+  if (out.fit.gouges) return out;  // cannot be trimmed clean: rejected
+  for (size_t v = 0; v < area.size(); ++v) {
+    const double d = out.fit.machined.design_deviation[v];
+    if (!covered[v] && std::isfinite(d) && std::abs(d) <= po.tolerance) out.gain += area[v];
+  }
+  out.ok = true;
+  return out;
+}
+
+}  // namespace
+
+Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
+                         const std::function<void(const CoverProgress&)>& on_progress) {
+  if (auto err = o.validate(); !err.empty()) throw InputError(err);
+  const TriMesh& m = surface.mesh();
+  const size_t nv = m.vertices.size();
+  const std::vector<double> area = vertex_areas(m);
+  const double tol = o.patch.tolerance;
+  Detection out;
+  std::vector<PatchFit> fits;
+  std::vector<double> gains;
+  std::vector<std::vector<int>> ring(nv);  // one-ring neighbours
+  for (const auto& f : m.faces)
+    for (int c = 0; c < 3; ++c) {
+      ring[size_t(f[size_t(c)])].push_back(f[size_t((c + 1) % 3)]);
+      ring[size_t(f[size_t(c)])].push_back(f[size_t((c + 2) % 3)]);
+    }
+  for (auto& r : ring) {
+    std::sort(r.begin(), r.end());
+    r.erase(std::unique(r.begin(), r.end()), r.end());
+  }
+  std::vector<char> covered(nv, 0);
+  std::vector<char> tried(nv, 0);  // seed vertices already used
+  CoverProgress progress;
+  const auto report = [&](const std::string& stage) {
+    progress.stage = stage;
+    progress.patches = int(fits.size());
+    progress.coverage = out.coverage;
+    if (on_progress) on_progress(progress);
+  };
+  const auto update_union = [&]() {
+    std::vector<const MachinedSurface*> ms;
+    for (const PatchFit& f : fits) ms.push_back(&f.machined);
+    UnionDeviation u = union_deviation(ms, nv);
+    out.owner = std::move(u.owner);
+    out.deviation = std::move(u.deviation);
+    out.coverage = coverage(m, out.deviation, tol);
+    for (size_t v = 0; v < nv; ++v) covered[v] = std::isfinite(out.deviation[v]) && std::abs(out.deviation[v]) <= tol;
+  };
+  update_union();
+  out.stop = CoverStop::NoProgress;
+  int failures = 0;
+  while (true) {
+    if (out.coverage >= o.coverage) {
+      out.stop = CoverStop::Coverage;
+      break;
+    }
+    if (int(fits.size()) >= o.max_patches) {
+      out.stop = CoverStop::MaxPatches;
+      break;
+    }
+    std::vector<char> blocked = covered;
+    for (size_t v = 0; v < nv; ++v) blocked[v] |= tried[v];
+    const std::vector<int> points = seed_points(surface, blocked, o);
+    progress.seeds = int(points.size());
+    progress.seed = 0;
+    report("seeding");
+    std::vector<Seed> seeds(points.size());
+#pragma omp parallel for schedule(dynamic, 1)
+    for (int k = 0; k < int(points.size()); ++k) seeds[size_t(k)] = best_line_at(surface, ring, points[size_t(k)], o);
+    std::vector<size_t> order(seeds.size());
+    std::iota(order.begin(), order.end(), size_t(0));
+    std::stable_sort(order.begin(), order.end(), [&](size_t x, size_t y) { return seeds[x].rank < seeds[y].rank; });
+    std::vector<Candidate> candidates;
+    for (size_t r = 0; r < order.size() && int(candidates.size()) < o.explored_seeds; ++r) {
+      const Seed& s = seeds[order[r]];
+      if (!std::isfinite(s.F)) break;
+      tried[size_t(s.vertex)] = 1;
+      progress.seed = int(r) + 1;
+      report("exploring and propagating");
+      const ExploredLine ex = explore_line(surface, s.line.a, s.line.b, o.patch.exploration);
+      const LineTrajectory tr = propagate_line(surface, ex.a, ex.b, o.patch.propagation);
+      Candidate c = keep_uncovered(surface, tr, ex.a, covered, area, o);
+      if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) continue;
+      candidates.push_back(std::move(c));
+    }
+    std::vector<size_t> by_sweep(candidates.size());
+    std::iota(by_sweep.begin(), by_sweep.end(), size_t(0));
+    std::stable_sort(by_sweep.begin(), by_sweep.end(),
+                     [&](size_t x, size_t y) { return candidates[x].uncovered_swept > candidates[y].uncovered_swept; });
+    Fitted best;
+    for (size_t r = 0; r < by_sweep.size() && int(r) < o.fitted_seeds; ++r) {
+      // Enough already.
+      if (best.ok && out.coverage + best.gain >= o.coverage) break;
+      report("fitting candidate " + std::to_string(r + 1));
+      const LineTrajectory& tr = candidates[by_sweep[r]].trajectory;
+      Fitted f = fit_candidate(surface, tr, covered, area, o);
+      ++out.seeds_tried;
+      // A sweep too long for one envelope within tolerance (it gouges all along, or brings little):
+      // its halves are fitted instead (shorter motions bend less).
+      const size_t half = tr.a.size() / 2;
+      if ((!f.ok || f.gain < 0.02) && half >= size_t(2 * o.patch.fit.rail_control_points))
+        for (int piece = 0; piece < 2; ++piece) {
+          LineTrajectory part;
+          const size_t from = piece == 0 ? 0 : half, to = piece == 0 ? half + half / 10 : tr.a.size();
+          const size_t lo = piece == 0 ? from : from - half / 10;  // a small overlap between the halves
+          part.a.assign(tr.a.begin() + long(lo), tr.a.begin() + long(to));
+          part.b.assign(tr.b.begin() + long(lo), tr.b.begin() + long(to));
+          part.F.assign(tr.F.begin() + long(lo), tr.F.begin() + long(to));
+          report("fitting candidate " + std::to_string(r + 1) + ", half " + std::to_string(piece + 1));
+          Fitted h = fit_candidate(surface, part, covered, area, o);
+          ++out.seeds_tried;
+          if (h.ok && (!f.ok || h.gain > f.gain)) f = std::move(h);
+        }
+      if (f.ok && f.gain > best.gain) best = std::move(f);
+    }
+    // A patch must bring a real share of the surface (0.5%) within tolerance.
+    if (!best.ok || best.gain < 0.005) {
+      // Nothing from these seeds: the next round takes the next-best ones (these are marked tried).
+      if (++failures >= 3 || seeds.empty()) break;
+      continue;
+    }
+    failures = 0;
+    fits.push_back(std::move(best.fit));
+    gains.push_back(best.gain);
+    update_union();
+    report("patch accepted");
+  }
+
+  // Machining order: along Φ's longest extent (principal axis of the vertices).
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const auto& x : m.vertices) centre += x / double(nv);
+  Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+  for (const auto& x : m.vertices) C += (x - centre) * (x - centre).transpose();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
+  Eigen::Vector3d axis = es.eigenvectors().col(2);
+  if (axis.sum() < 0) axis = -axis;  // deterministic sign
+  std::vector<double> key(fits.size(), 0.0), weight(fits.size(), 0.0);
+  for (size_t v = 0; v < nv; ++v)
+    if (out.owner[v] >= 0) {
+      key[size_t(out.owner[v])] += area[v] * m.vertices[v].dot(axis);
+      weight[size_t(out.owner[v])] += area[v];
+    }
+  for (size_t p = 0; p < fits.size(); ++p)
+    key[p] = weight[p] > 0 ? key[p] / weight[p] : fits[p].fit.rails.point(0.5, 0.5).dot(axis);
+  std::vector<size_t> order(fits.size());
+  std::iota(order.begin(), order.end(), size_t(0));
+  std::stable_sort(order.begin(), order.end(), [&](size_t x, size_t y) { return key[x] < key[y]; });
+  std::vector<int> new_index(fits.size());
+  for (size_t k = 0; k < order.size(); ++k) {
+    const size_t p = order[k];
+    new_index[p] = int(k);
+    DetectedPatch d;
+    d.spec.name = "auto-" + std::to_string(k + 1);
+    d.spec.init = PatchInit::Lines;
+    d.spec.lines = lines_of(fits[p].fit.rails, o.lines);
+    d.spec.rail = 0;
+    d.spec.length = fits[p].fit.rails.length;
+    d.fit = std::move(fits[p]);
+    d.new_area = gains[p];
+    out.patches.push_back(std::move(d));
+  }
+  for (int& w : out.owner)
+    if (w >= 0) w = new_index[size_t(w)];
+  out.overcut = 0;
+  for (double d : out.deviation)
+    if (std::isfinite(d)) out.overcut = std::max(out.overcut, -d);
+  return out;
+}
+
+}  // namespace flankcam

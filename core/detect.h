@@ -1,0 +1,71 @@
+// Automatic detection of flank-milling patches (the paper's open problem, Sec. 6): candidate axis
+// lines over the whole surface ranked by tangential movability F_l (eq. 5), explored (Sec. 4.2),
+// propagated (Sec. 4.3) and optimised (Sec. 4.5), chosen greedily by the area their machined
+// surface brings within tolerance that no earlier patch covers. Unit-diagonal frame throughout.
+#pragma once
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "core/patch.h"
+
+namespace flankcam {
+
+struct CoverOptions {
+  double coverage = 0.95;  // share of Φ's area to bring within `patch.tolerance`
+  int max_patches = 8;
+  // Seeding (Sec. 4.1): seed points on a grid of this many cells across the surface's area, at each
+  // `directions` line directions in the tangent plane, offset along ±normal by each radius.
+  int seed_points = 48;
+  int directions = 5;
+  std::vector<double> radii = {0.025, 0.05, 0.09};  // candidate tool radii (unit frame)
+  int explored_seeds = 4;  // best-ranked seeds explored and propagated per patch
+  int fitted_seeds = 2;    // of those, the trajectories sweeping the most uncovered area are fitted
+  double band = 0.03;      // overlap into covered area a new patch's trajectory keeps (unit frame, arc length)
+  int lines = 8;           // axis lines written per patch (init: lines) to reproduce it
+  PatchOptions patch;      // fit, exploration, propagation, machined surface, tolerance
+  std::string validate() const;  // empty when valid, else names the field
+};
+
+enum class CoverStop { Coverage, MaxPatches, NoProgress };
+[[nodiscard]] const char* to_string(CoverStop s);
+
+struct CoverProgress {
+  int seed = 0, seeds = 0;   // seed k of N within the current patch
+  int patches = 0;           // accepted so far
+  double coverage = 0;       // whole-surface coverage so far
+  std::string stage;         // "seeding", "exploring", "fitting", ...
+};
+
+struct DetectedPatch {
+  PatchSpec spec;            // name auto-k, init: lines, rail 0: re-running it reproduces the patch
+  PatchFit fit;              // the fit trimmed in t where it gouged Φ (fit.t_from, fit.t_to), its machined surface
+  double new_area = 0;       // share of Φ's area this patch brought within tolerance first
+};
+
+struct Detection {
+  std::vector<DetectedPatch> patches;   // machining order: along Φ's longest extent
+  std::vector<int> owner;               // per Φ vertex: index into patches of the patch that machines it, -1: none
+  std::vector<double> deviation;        // per Φ vertex: the union (most material removed, min over patches); NaN: uncut
+  double coverage = 0;                  // share of Φ's area with |deviation| <= tolerance
+  double overcut = 0;                   // worst overcut of the union (>= 0, unit frame)
+  CoverStop stop = CoverStop::NoProgress;
+  int seeds_tried = 0;                  // trajectories fitted
+};
+
+// `patches: auto` of a job: one call. Throws InputError for invalid options; a surface on which no
+// line is movable gives an empty Detection with stop NoProgress.
+[[nodiscard]] Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& options,
+                                       const std::function<void(const CoverProgress&)>& on_progress = {});
+
+// The union of several machined surfaces over Φ: owner and deviation per vertex (see Detection).
+struct UnionDeviation {
+  std::vector<int> owner;
+  std::vector<double> deviation;
+};
+[[nodiscard]] UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machined, size_t vertices);
+
+// Lines through the rails at `count` uniform t (unit frame), an `init: lines` description of the motion.
+[[nodiscard]] std::vector<AxisLine> lines_of(const Rails& rails, int count);
+
+}  // namespace flankcam

@@ -1,0 +1,171 @@
+#include "core/detect.h"
+
+#include <doctest/doctest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+
+#include "core/envelope.h"
+#include "core/errors.h"
+#include "tests/test_util.h"
+
+using namespace flankcam;
+
+namespace {
+
+// Coarser than the bench (66 x 200) to keep the suite quick; still an exact envelope.
+struct Case {
+  const char* kind;
+  const char* tool;
+  RadiusProfile profile;
+};
+
+double worst_overcut(const Detection& d) {
+  double worst = 0;
+  for (double x : d.deviation)
+    if (std::isfinite(x)) worst = std::max(worst, -x);
+  for (const DetectedPatch& p : d.patches)
+    for (double x : p.fit.machined.omega_deviation)
+      if (std::isfinite(x)) worst = std::max(worst, -x);
+  return worst;
+}
+
+}  // namespace
+
+TEST_CASE("auto detection covers an exact envelope with one patch within 1e-4 of the diagonal and no overcut") {
+  const std::vector<Case> cases = {{"arc", "cone", cone_profile(6, 9)}, {"twist", "cylinder", cylinder_profile(6)}};
+  for (const Case& c : cases) {
+    const std::string name = std::string(c.kind) + " " + c.tool;
+    CAPTURE(name);
+    test::ExactEnvelope ex = test::exact_envelope(c.kind, c.profile, 50, 150);
+    const SurfaceIndex surface(ex.unit_mesh);
+    CoverOptions o;
+    o.patch.tolerance = 1e-4;
+    int calls = 0;
+    const Detection d = detect_patches(surface, o, [&](const CoverProgress& p) {
+      ++calls;
+      CHECK(p.seed <= p.seeds);
+    });
+    CHECK(calls > 0);
+    REQUIRE(d.patches.size() == 1);
+    CHECK(d.stop == CoverStop::Coverage);
+    CHECK(d.coverage >= 0.95);
+    CHECK(worst_overcut(d) <= 1e-4);
+    const DetectedPatch& p = d.patches[0];
+    CHECK(p.spec.name == "auto-1");
+    CHECK(p.spec.init == PatchInit::Lines);
+    CHECK(int(p.spec.lines.size()) == o.lines);
+    // The owner of every covered vertex is the patch; the union is that patch's deviation.
+    for (size_t v = 0; v < d.owner.size(); ++v)
+      if (std::isfinite(d.deviation[v])) CHECK(d.owner[v] == 0);
+    CHECK(coverage(ex.unit_mesh, d.deviation, o.patch.tolerance) == doctest::Approx(d.coverage));
+
+    // The written-out lines reproduce the patch as an init: lines patch.
+    PatchOptions po;
+    po.tolerance = 1e-4;
+    po.trim_gouges = true;
+    const PatchFit again = fit_patch(surface, p.spec, po);
+    CHECK(again.coverage >= 0.9);
+  }
+}
+
+TEST_CASE("auto detection is deterministic") {
+  test::ExactEnvelope ex = test::exact_envelope("s-curve", cylinder_profile(6), 40, 120);
+  const SurfaceIndex surface(ex.unit_mesh);
+  CoverOptions o;  // a small search: the property is the same at any size
+  o.max_patches = 1;
+  o.explored_seeds = 2;
+  o.fitted_seeds = 1;
+  const Detection d1 = detect_patches(surface, o), d2 = detect_patches(surface, o);
+  REQUIRE(d1.patches.size() == d2.patches.size());
+  CHECK(d1.coverage == d2.coverage);
+  for (size_t k = 0; k < d1.patches.size(); ++k)
+    for (size_t i = 0; i < d1.patches[k].spec.lines.size(); ++i) {
+      CHECK(d1.patches[k].spec.lines[i].a == d2.patches[k].spec.lines[i].a);
+      CHECK(d1.patches[k].spec.lines[i].b == d2.patches[k].spec.lines[i].b);
+    }
+}
+
+TEST_CASE("two exact envelopes side by side need two patches, in order along the surface, each owning its part") {
+  // Two envelopes of different tools along the same s-curve, one after the other in x, joined into one mesh.
+  AnalyticMotionOptions mo;
+  mo.kind = "twist";
+  const LineMotion m = analytic_motion(mo);
+  const EnvelopeGrid g1 = envelope_grid(m, cylinder_profile(6), 30, 60, 1, 0.0, 0.5);
+  const EnvelopeGrid g2 = envelope_grid(m, cone_profile(4, 9), 30, 60, 1, 0.5, 1.0);
+  TriMesh both = g1.mesh;
+  const int off = int(both.vertices.size());
+  both.vertices.insert(both.vertices.end(), g2.mesh.vertices.begin(), g2.mesh.vertices.end());
+  for (auto f : g2.mesh.faces) both.faces.push_back({f[0] + off, f[1] + off, f[2] + off});
+  const Similarity frame = unit_diagonal_frame(both);
+  const SurfaceIndex surface(transformed(both, frame));
+  CoverOptions o;
+  o.patch.tolerance = 2e-4;
+  o.max_patches = 3;
+  const Detection d = detect_patches(surface, o);
+  CHECK(d.patches.size() >= 2);
+  CHECK(d.coverage >= 0.85);
+  CHECK(worst_overcut(d) <= 2e-4);
+  // Machining order along x: auto-1 owns the first half of the vertices mostly.
+  REQUIRE(d.patches.size() >= 2);
+  CHECK(d.patches[0].spec.name == "auto-1");
+  CHECK(d.patches[1].spec.name == "auto-2");
+  int first_half_by_1 = 0, first_half = 0;
+  for (int v = 0; v < off; ++v)
+    if (d.owner[size_t(v)] >= 0) ++first_half, first_half_by_1 += d.owner[size_t(v)] == 0;
+  CHECK(first_half_by_1 > first_half / 2);
+}
+
+TEST_CASE("cover options name the bad field") {
+  CoverOptions o;
+  CHECK(o.validate().empty());
+  o.coverage = 1.5;
+  CHECK(o.validate().find("cover.coverage") != std::string::npos);
+  o = {};
+  o.max_patches = 0;
+  CHECK(o.validate().find("cover.max_patches") != std::string::npos);
+  test::ExactEnvelope ex = test::exact_envelope("arc", cylinder_profile(6), 20, 40);
+  const SurfaceIndex surface(ex.unit_mesh);
+  CHECK_THROWS_AS((void)detect_patches(surface, o), InputError);
+}
+
+TEST_CASE("the union deviation keeps the deepest cut and names its patch") {
+  MachinedSurface a, b;
+  const double nan = std::nan("");
+  a.design_deviation = {1e-5, nan, 3e-4, -2e-5};
+  b.design_deviation = {5e-5, 2e-5, -1e-5, nan};
+  const UnionDeviation u = union_deviation({&a, &b}, 4);
+  CHECK(u.owner == std::vector<int>{0, 1, 1, 0});
+  CHECK(u.deviation[0] == 1e-5);
+  CHECK(u.deviation[2] == -1e-5);
+  CHECK(u.deviation[3] == -2e-5);
+}
+
+TEST_CASE("propagation from a line off the true axis runs to the surface boundary on every analytic motion") {
+  for (const char* kind : {"twist", "arc", "helix", "s-curve"}) {
+    CAPTURE(kind);
+    test::ExactEnvelope ex = test::exact_envelope(kind, cone_profile(6, 9), 40, 120);
+    const SurfaceIndex surface(ex.unit_mesh);
+    // The axis at t = 0.3, slid 10% of its length along itself and turned by 1 degree: a seed as
+    // detection finds it, not the exact axis.
+    const Eigen::Vector3d a = ex.frame.to_unit(ex.motion.a(0.3)), b = ex.frame.to_unit(ex.motion.b(0.3));
+    const Eigen::Vector3d e = (b - a).normalized(), slide = 0.1 * (b - a);
+    const Eigen::Vector3d turn = e.cross(Eigen::Vector3d::UnitZ()).normalized() * std::tan(M_PI / 180) * (b - a).norm();
+    const LineTrajectory tr = propagate_line(surface, a + slide, b + slide + turn);
+    CHECK(tr.stop_backward == PropagationStop::Boundary);
+    CHECK(tr.stop_forward == PropagationStop::Boundary);
+    // Both ends of the motion are reached: the nearest exact axis positions of the first and last line.
+    const auto t_of = [&](const Eigen::Vector3d& mid) {
+      double best_t = 0, best = 1e9;
+      for (int i = 0; i <= 400; ++i) {
+        const double t = i / 400.0;
+        const double d = (0.5 * (ex.frame.to_unit(ex.motion.a(t)) + ex.frame.to_unit(ex.motion.b(t))) - mid).norm();
+        if (d < best) best = d, best_t = t;
+      }
+      return best_t;
+    };
+    const double t0 = t_of(0.5 * (tr.a.front() + tr.b.front())), t1 = t_of(0.5 * (tr.a.back() + tr.b.back()));
+    CHECK(std::min(t0, t1) < 0.05);
+    CHECK(std::max(t0, t1) > 0.95);
+  }
+}
