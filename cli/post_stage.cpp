@@ -6,6 +6,7 @@
 
 #include "core/errors.h"
 #include "postproc/gcode.h"
+#include "postproc/verify.h"
 
 namespace flankcam::cli {
 
@@ -77,6 +78,8 @@ std::vector<WrittenProgram> write_programs(const std::filesystem::path& out, con
       pending.push_back({all_name + file_extension(d), "", d, std::move(p)});
     }
   }
+  for (const Pending& p : pending)
+    if (!p.posted.refused.empty()) throw ProgramRefused("back-simulation: " + p.posted.refused + "; nothing written");
   std::vector<WrittenProgram> written;
   for (const Pending& p : pending) {
     write_nc((out / p.file).string(), p.posted.program, {p.dialect, settings.line_numbers, settings.options.path.tolerance_mm});

@@ -11,7 +11,9 @@
 #include "cli/fit_stage.h"
 #include "cli/post_stage.h"
 #include "core/atomic_file.h"
+#include "core/closest_point.h"
 #include "core/errors.h"
+#include "core/mesh.h"
 #include "postproc/report_html.h"
 #include "postproc/report_svg.h"
 
@@ -63,6 +65,14 @@ int run_job(const RunArgs& args) {
     if (!args.quiet) fmt::print(stderr, "flankcam run: {}\n", line);
   };
   const FittedJob fitted = fit_job(job, args.threads, progress);
+  // The part placed on the machine (work frame): links are planned against it and every program is
+  // back-simulated before it is written.
+  TriMesh part_work = job.part != job.surface ? load_mesh(job.part.string()).mesh : fitted.surface.mesh;
+  for (Eigen::Vector3d& v : part_work.vertices) v = to_work(job.post, {v, Eigen::Vector3d::UnitZ()}).tip;
+  const SurfaceIndex part_index(std::move(part_work));
+  settings.options.part = &part_index;
+  settings.options.clearance_mm = job.clearance_mm;
+  settings.options.gouge_tolerance_mm = job.tolerance_mm;
 
   // Kinematics and programs for every patch allowed to run, all solved before any file is written:
   // an unreachable pose ends the run with nothing half done.
@@ -74,7 +84,9 @@ int run_job(const RunArgs& args) {
     cl_data[k] = patch_program(job, fitted, p, int(k) + 1);
     ClProgram work = *cl_data[k];
     for (ClMove& mv : work.moves) mv.pose = to_work(job.post, mv.pose);
-    inputs.push_back({std::move(work), p.job->name, tool_length(job, p)});
+    ToolAssembly assembly = p.assembly;  // the program's cutter is the meridian
+    assembly.cutter = p.profile_mm;
+    inputs.push_back({std::move(work), p.job->name, tool_length(job, p), assembly});
   }
   const std::filesystem::path out = args.out;
   std::filesystem::create_directories(out);
