@@ -86,7 +86,7 @@ struct PostInput {
   ClProgram cl;
   std::string patch;  // for messages: "patch 'NAME': pose I ... out of reach"
   double tool_length_mm = 0;  // spindle nose to tip (head axes); 0: PostOptions::path.tool_length_mm
-  ToolAssembly assembly;      // cutter, shank, holder for the link planning and the back-simulation;
+  ToolAssembly assembly{};    // cutter, shank, holder for the link planning and the back-simulation;
                               // no cutter: the CL-data's profile without shank and holder
 };
 
