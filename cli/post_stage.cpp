@@ -37,6 +37,10 @@ WrittenProgram summarize(const Posted& posted, const std::string& file, const st
     w.slowed += s.slowed_blocks;
     w.singular += int(s.path.singular.size());
     w.branch_changes += s.path.branch_changes;
+    for (const SingularStretch& st : singular_stretches(s.path))
+      w.singular_stretches.push_back({{"patch", s.patch}, {"poses", {st.first_pose, st.last_pose}},
+                                      {"rotary_travel_deg", std::round(st.rotary_deg * 1e3) / 1e3},
+                                      {"axis_turn_deg", std::round(st.axis_turn_deg * 1e3) / 1e3}});
     for (const Joints& j : s.path.joints)
       for (size_t k = 0; k < 2; ++k)
         w.rotary_range[k] = {std::min(w.rotary_range[k][0], j.rotary[k]), std::max(w.rotary_range[k][1], j.rotary[k])};
@@ -96,6 +100,7 @@ nlohmann::ordered_json program_report(const WrittenProgram& w, const Machine& m)
   j["inserted_by_linearisation"] = w.inserted;
   j["slowed_blocks"] = w.slowed;
   j["near_singular_poses"] = w.singular;
+  j["near_singular_stretches"] = w.singular_stretches;  // rotary travel >> tool-axis turn
   j["branch_changes"] = w.branch_changes;
   for (size_t k = 0; k < 2; ++k)
     j["rotary_range_deg"][m.rotary[k].name] = {std::round(w.rotary_range[k][0] * 1e4) / 1e4,
