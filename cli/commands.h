@@ -13,5 +13,6 @@ Run add_post_command(CLI::App& app);
 Run add_run_command(CLI::App& app);
 Run add_blade_command(CLI::App& app);
 Run add_faces_command(CLI::App& app);
+Run add_verify_command(CLI::App& app);
 
 }  // namespace flankcam::cli

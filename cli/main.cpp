@@ -5,6 +5,7 @@
 
 #include "cli/commands.h"
 #include "core/errors.h"
+#include "postproc/verify.h"
 
 int main(int argc, char** argv) {
   CLI::App app{"flankcam: 5-axis flank milling toolpaths with custom tools of revolution"};
@@ -22,6 +23,7 @@ int main(int argc, char** argv) {
   register_command(&flankcam::cli::add_run_command);
   register_command(&flankcam::cli::add_blade_command);
   register_command(&flankcam::cli::add_faces_command);
+  register_command(&flankcam::cli::add_verify_command);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -30,6 +32,9 @@ int main(int argc, char** argv) {
   try {
     for (auto& [sub, run] : commands)
       if (sub->parsed()) return run();
+  } catch (const flankcam::ProgramRefused& e) {
+    std::fprintf(stderr, "flankcam: refused: %s\n", e.what());
+    return 4;
   } catch (const flankcam::InputError& e) {
     std::fprintf(stderr, "flankcam: error: %s\n", e.what());
     return 2;

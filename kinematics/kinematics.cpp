@@ -125,6 +125,11 @@ Eigen::Vector3d linear_joints(const Machine& m, const ToolPose& pose, const std:
   return c.table.apply(pose.tip) - c.head.t;
 }
 
+TableTransform table_transform(const Machine& m, const std::array<double, 2>& deg) {
+  const Chains c = chains(m, deg, 0);
+  return {c.table.R, c.table.t};
+}
+
 ToolPose forward(const Machine& m, const Joints& q, double tool_length) {
   const Chains c = chains(m, q.rotary, tool_length);
   ToolPose p;

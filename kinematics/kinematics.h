@@ -40,6 +40,15 @@ struct RotarySolution {
 [[nodiscard]] Eigen::Vector3d linear_joints(const Machine& m, const ToolPose& pose, const std::array<double, 2>& rotary_deg,
                                             double tool_length_mm);
 
+// Part (work) frame -> machine frame at these rotary angles: the table chain (identity for head
+// axes). Heights in the machine frame are what a safe Z must clear.
+struct TableTransform {
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d t = Eigen::Vector3d::Zero();
+  [[nodiscard]] Eigen::Vector3d apply(const Eigen::Vector3d& x_part) const { return R * x_part + t; }
+};
+[[nodiscard]] TableTransform table_transform(const Machine& m, const std::array<double, 2>& rotary_deg);
+
 // Every joint solution of a pose (0, 1 or 2; limits not applied, free angles at 0).
 [[nodiscard]] std::vector<Joints> inverse(const Machine& m, const ToolPose& pose, double tool_length_mm);
 

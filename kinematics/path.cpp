@@ -335,6 +335,32 @@ ToolPose programmed_pose(const Machine& m, const Joints& programmed, double tool
   return {programmed.linear, fk.axis};
 }
 
+std::vector<SingularStretch> singular_stretches(const JointPath& path, double ratio, double min_rotary_deg) {
+  std::vector<SingularStretch> out;
+  SingularStretch cur;
+  bool open = false;
+  const auto close = [&] {
+    if (open && cur.rotary_deg >= min_rotary_deg) out.push_back(cur);
+    open = false;
+  };
+  for (size_t i = 1; i < path.joints.size(); ++i) {
+    const double rot = std::abs(path.joints[i].rotary[0] - path.joints[i - 1].rotary[0]) +
+                       std::abs(path.joints[i].rotary[1] - path.joints[i - 1].rotary[1]);
+    const Eigen::Vector3d &a = path.poses[i - 1].axis, &b = path.poses[i].axis;
+    const double turn = std::atan2(a.cross(b).norm(), a.dot(b)) * 180 / M_PI;
+    if (rot > 1e-6 && rot > ratio * turn) {
+      if (!open) cur = {int(i) - 1, int(i), 0, 0}, open = true;
+      cur.last_pose = int(i);
+      cur.rotary_deg += rot;
+      cur.axis_turn_deg += turn;
+    } else {
+      close();
+    }
+  }
+  close();
+  return out;
+}
+
 std::vector<BlockFeed> block_feeds(const Machine& m, const JointPath& path, double feed) {
   if (!(feed > 0)) throw InputError("feed: must be > 0 mm/min");
   return block_feeds(m, path, std::vector<double>(path.joints.size(), feed));

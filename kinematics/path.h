@@ -53,6 +53,19 @@ void require_reachable(const JointPath& path, const std::vector<ToolPose>& poses
 // joints, or with TCP the tip as written and the axis the rotary angles give.
 [[nodiscard]] ToolPose programmed_pose(const Machine& m, const Joints& programmed, double tool_length_mm);
 
+// A stretch of consecutive blocks where the rotary axes travel far more than the tool axis turns:
+// near a singular orientation the free angle swings (xyzac-trt near A = 0: C turns 89.5 deg while
+// the axis turns 3.1 deg). Poses index JointPath::poses; block i runs from pose i-1 to pose i.
+struct SingularStretch {
+  int first_pose = 0, last_pose = 0;
+  double rotary_deg = 0;      // |dR1| + |dR2| summed over the stretch
+  double axis_turn_deg = 0;   // the tool axis' turn over the stretch (summed per block)
+};
+// Blocks whose rotary travel exceeds `ratio` degrees per degree of axis turn, merged into stretches,
+// kept when they travel at least `min_rotary_deg`.
+[[nodiscard]] std::vector<SingularStretch> singular_stretches(const JointPath& path, double ratio = 5,
+                                                              double min_rotary_deg = 5);
+
 struct BlockFeed {
   double minutes = 0;       // duration of the block (from the previous pose)
   double inverse_time = 0;  // G93 F word: 1 / minutes

@@ -7,6 +7,7 @@
 #include "core/errors.h"
 #include "pipeline/data_dir.h"
 #include "postproc/gcode.h"
+#include "postproc/verify.h"
 
 namespace flankcam::pipeline {
 
@@ -44,6 +45,10 @@ PostedProgram summarize(Posted posted, const std::string& file, const std::strin
     w.slowed += s.slowed_blocks;
     w.singular += int(s.path.singular.size());
     w.branch_changes += s.path.branch_changes;
+    for (const SingularStretch& st : singular_stretches(s.path))
+      w.singular_stretches.push_back({{"patch", s.patch}, {"poses", {st.first_pose, st.last_pose}},
+                                      {"rotary_travel_deg", std::round(st.rotary_deg * 1e3) / 1e3},
+                                      {"axis_turn_deg", std::round(st.axis_turn_deg * 1e3) / 1e3}});
     for (const Joints& j : s.path.joints)
       for (size_t k = 0; k < 2; ++k)
         w.rotary_range[k] = {std::min(w.rotary_range[k][0], j.rotary[k]), std::max(w.rotary_range[k][1], j.rotary[k])};
@@ -81,6 +86,8 @@ std::vector<PostedProgram> post_programs(const Machine& m, const std::vector<Pos
       out.push_back(summarize(std::move(p), all_name + file_extension(d), "", d));
     }
   }
+  for (const PostedProgram& p : out)
+    if (!p.posted.refused.empty()) throw ProgramRefused("back-simulation: " + p.posted.refused + "; nothing written");
   return out;
 }
 
@@ -92,6 +99,7 @@ nlohmann::ordered_json program_report(const PostedProgram& w, const Machine& m) 
   j["inserted_by_linearisation"] = w.inserted;
   j["slowed_blocks"] = w.slowed;
   j["near_singular_poses"] = w.singular;
+  j["near_singular_stretches"] = w.singular_stretches;  // rotary travel >> tool-axis turn
   j["branch_changes"] = w.branch_changes;
   for (size_t k = 0; k < 2; ++k)
     j["rotary_range_deg"][m.rotary[k].name] = {std::round(w.rotary_range[k][0] * 1e4) / 1e4,

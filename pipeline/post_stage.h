@@ -35,6 +35,7 @@ struct PostedProgram {
   std::array<std::array<double, 2>, 2> rotary_range{};  // min, max degrees per rotary axis
   double minutes = 0;             // feed time of the cut moves
   std::array<std::vector<double>, 2> rotary_deg;  // programmed angles per move (for the chart)
+  nlohmann::ordered_json singular_stretches = nlohmann::ordered_json::array();  // kinematics/path.h singular_stretches
 };
 
 // Posts `inputs` (one per patch, in order): PATCH.EXT for each and, with more than one,

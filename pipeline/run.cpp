@@ -128,13 +128,24 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     if (!r.fit.cl_data[k]) continue;
     ClProgram work = *r.fit.cl_data[k];
     for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
-    inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back()});
+    ToolAssembly assembly = p.assembly;  // the program's cutter is the tool's meridian
+    assembly.cutter = p.profile_mm;
+    inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back(), std::move(assembly)});
   }
   if (inputs.empty()) return r;
+  // The part placed on the machine (work frame): the links are planned against it, and every
+  // program is back-simulated from its text before anything is written.
+  TriMesh part_work = r.fit.fitted.part ? *r.fit.fitted.part : r.fit.fitted.surface.mesh;
+  for (Eigen::Vector3d& v : part_work.vertices) v = to_work(j.post, {v, Eigen::Vector3d::UnitZ()}).tip;
+  const SurfaceIndex part_index(std::move(part_work));
+  PostSettings settings = r.settings;  // r.settings must not keep a pointer to part_index
+  settings.options.part = &part_index;
+  settings.options.clearance_mm = j.clearance_mm;
+  settings.options.gouge_tolerance_mm = j.tolerance_mm;
   const Machine& m = r.machine;
   options.progress(fmt::format("kinematics and post: {} patch(es) on {} ({})", inputs.size(), m.name, m.kind()));
   r.programs = post_programs(
-      m, inputs, all_patches_name, r.settings,
+      m, inputs, all_patches_name, settings,
       {fmt::format("flankcam run of {}", j.file.filename().string()), fmt::format("machine {} ({}), units mm", m.name, m.kind()),
        fmt::format("linearisation tolerance {} mm, {} deg", j.post.tolerance_mm, j.post.angle_tolerance_deg),
        fmt::format("work frame = part rotated X {} Y {} Z {} deg, moved by ({}, {}, {}) mm", j.post.setup_rotate_deg[0],

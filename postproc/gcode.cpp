@@ -23,6 +23,13 @@ std::string signed_mm(double x) {
   return s[0] == '-' ? s : "+" + s;
 }
 std::string rpm(double x) { return fixed(x, 0); }
+// A mm/min (or deg/min) feed rounded down to 0.001, never up: a block slowed to an axis' top speed
+// stays within it. Trailing zeros go (F600.0, F1234.567).
+std::string feed_mm_min(double x) {
+  std::string s = fixed(std::floor(x * 1000 + 1e-6) / 1000, 3);
+  while (s.size() > 2 && s.back() == '0' && s[s.size() - 2] != '.') s.pop_back();
+  return s;
+}
 
 // Comment text without the characters that would end or nest the comment.
 std::string comment_text(const std::string& s) {
@@ -102,7 +109,7 @@ class GcodeEmitter : public Emitter {
     if (!m.rapid) {
       if (p.inverse_time) {
         b += "F" + fixed(m.inverse_time, 4);
-      } else if (const std::string f = fixed(m.feed_mm_min, 1); f != feed_) {
+      } else if (const std::string f = feed_mm_min(m.feed_mm_min); f != feed_) {
         b += "F" + f;
         feed_ = f;
       }
@@ -231,7 +238,7 @@ class HeidenhainEmitter final : public Emitter {
       if (m.axes & (1u << k)) b += fmt::format(" {}{}", kLinear[k], signed_mm(m.at.linear[k]));
     for (int k = 0; k < 2; ++k)
       if (m.axes & (8u << k)) b += fmt::format(" {}{}", p.rotary_names[size_t(k)], signed_mm(m.at.rotary[size_t(k)]));
-    b += m.rapid ? " R0 FMAX" : " R0 F" + fixed(m.feed_mm_min, 1);
+    b += m.rapid ? " R0 FMAX" : " R0 F" + feed_mm_min(m.feed_mm_min);
     lines_.add(b);
   }
   void end(const NcProgram&) override {

@@ -5,7 +5,8 @@
 // Dialects: iso (Fanuc style: G43.4 TCP or G43 + joints, G93/G94), linuxcnc (joints, or tip + angles
 // under its trt kinematics; G93 with F on every G1; G64 P blending tolerance), heidenhain
 // (conversational: L X+.. A+.. F, FUNCTION TCPM, feed in mm/min), sinumerik (TRAORI with rotary
-// angles, G93). Numbers: 4 decimals for mm and degrees, 4 for inverse-time F, 1 for mm/min; no "-0".
+// angles, G93). Numbers: 4 decimals for mm and degrees, 4 for inverse-time F, mm/min F rounded down to
+// 0.001 (at least 1 decimal); no "-0".
 #pragma once
 #include <string>
 #include <vector>

@@ -8,7 +8,9 @@
 
 #include "core/errors.h"
 #include "core/message_text.h"
+#include "postproc/gcode.h"
 #include "postproc/tool_export.h"
+#include "postproc/verify.h"
 
 namespace flankcam {
 
@@ -65,6 +67,9 @@ std::string PostOptions::validate() const {
   if (std::string why = path.validate(); !why.empty()) return why;
   if (!(max_inverse_time > 0)) return "max_inverse_time: must be > 0";
   if (!(safe_height_mm >= 0) || !std::isfinite(safe_height_mm)) return "safe_height_mm: must be >= 0";
+  if (!(clearance_mm > 0) || !std::isfinite(clearance_mm)) return "clearance_mm: must be > 0";
+  if (!(lead_mm > 0) || !std::isfinite(lead_mm)) return "lead_mm: must be > 0";
+  if (!(gouge_tolerance_mm > 0) || !std::isfinite(gouge_tolerance_mm)) return "gouge_tolerance_mm: must be > 0";
   return {};
 }
 
@@ -87,22 +92,171 @@ bool same_rotaries(const Joints& a, const Joints& b) {
 }
 
 struct Solved {
+  ClProgram cl;            // as posted: with a part, its links planned
   JointPath path;
   std::vector<Joints> at;  // programmed values per output pose
   std::vector<int> owner;
   double tool_length_mm = 0;
+  ToolAssembly assembly;
 };
+
+// The assembly a section is checked with: the given one, or the CL profile alone.
+ToolAssembly assembly_of(const PostInput& in) {
+  if (!in.assembly.cutter.empty()) return assembly_from_meridian(in.assembly.cutter, in.assembly);
+  ToolAssembly a;
+  if (in.cl.profile.size() >= 2) return assembly_from_meridian(in.cl.profile, a);
+  {  // APT-7 cutter without a profile: its cylinder
+    const double r = std::max(0.5 * in.cl.cutter.d, 1e-3), h = in.cl.cutter.h > 0 ? in.cl.cutter.h : 4 * r;
+    a.cutter = {{0, r}, {h, r}};
+  }
+  return a;
+}
+
+double max_radius(const ToolAssembly& a) {
+  double r = std::max(0.5 * a.shank_diameter, 0.5 * std::max(a.holder_diameter, a.holder_diameter_far));
+  for (const auto& c : a.cutter) r = std::max(r, c.y());
+  return r;
+}
+
+// A move from p to q that only shifts the tool along its own (unchanged) axis: a lead along the axis.
+bool axial(const ToolPose& p, const ToolPose& q) {
+  const Eigen::Vector3d d = q.tip - p.tip;
+  return d.norm() > 1e-9 && p.axis.cross(q.axis).norm() < 1e-9 && p.axis.cross(d).norm() <= 1e-6 * d.norm();
+}
+
+// Off the surface: the direction from the part's point nearest the middle of the cutter to the axis,
+// across the axis (the flank's normal at the contact line). The axis when the part lies on it.
+Eigen::Vector3d off_surface(const SurfaceIndex& part, const ToolPose& p, double cutter_length) {
+  const Eigen::Vector3d mid = p.tip + 0.5 * cutter_length * p.axis;
+  Eigen::Vector3d v = mid - part.closest(mid).point;
+  v -= v.dot(p.axis) * p.axis;
+  return v.norm() > 1e-6 ? Eigen::Vector3d(v.normalized()) : p.axis;
+}
+
+// The CL-data with its links planned against the part: its own approach (rapids before the first
+// feed move and axial lead-ins) and leave (axial lead-outs and trailing rapids) replaced by a rapid to
+// a point `lead` off the first pose along the surface normal, a feed in along the normal, the cut, and
+// a feed out along the normal. `lead` is at least the cutter's radius variation plus the clearance:
+// from there a move along the axis cannot reach the finished flank of an hourglass tool.
+ClProgram plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAssembly& a, const PostOptions& o) {
+  const size_t n = cl.moves.size();
+  size_t first = 0;
+  while (first < n && cl.moves[first].rapid) ++first;
+  if (first == n) return cl;
+  while (first + 1 < n && !cl.moves[first + 1].rapid && axial(cl.moves[first].pose, cl.moves[first + 1].pose)) ++first;
+  size_t last = n - 1;
+  while (last > first && cl.moves[last].rapid) --last;
+  while (last > first && axial(cl.moves[last - 1].pose, cl.moves[last].pose)) --last;
+  double rmin = INFINITY, rmax = 0;
+  for (const auto& c : a.cutter) rmin = std::min(rmin, c.y()), rmax = std::max(rmax, c.y());
+  const double lead = std::max(o.lead_mm, rmax - rmin + o.clearance_mm);
+  const ClMove &p0 = cl.moves[first], &p1 = cl.moves[last];
+  ClProgram out = cl;
+  out.moves.clear();
+  out.moves.push_back({{p0.pose.tip + lead * off_surface(part, p0.pose, a.cutter_length()), p0.pose.axis}, true, 0});
+  for (size_t k = first; k <= last; ++k) out.moves.push_back(cl.moves[k]);
+  out.moves.back().rapid = false;
+  out.moves.push_back({{p1.pose.tip + lead * off_surface(part, p1.pose, a.cutter_length()), p1.pose.axis}, false,
+                       p1.feed_mm_min > 0 ? p1.feed_mm_min : p0.feed_mm_min});
+  for (ClMove& mv : out.moves)
+    if (!mv.rapid && !(mv.feed_mm_min > 0)) mv.feed_mm_min = p0.feed_mm_min;
+  return out;
+}
+
+// The part's highest point in the machine frame over the table angles the program uses (a 2 degree
+// grid over each table axis' range, plus what a point can rise between grid angles).
+double part_top_machine(const Machine& m, const SurfaceIndex& part, const std::vector<Solved>& solved) {
+  std::array<double, 2> lo{INFINITY, INFINITY}, hi{-INFINITY, -INFINITY};
+  for (const Solved& s : solved)
+    for (const Joints& q : s.path.joints)
+      for (size_t k = 0; k < 2; ++k) lo[k] = std::min(lo[k], q.rotary[k]), hi[k] = std::max(hi[k], q.rotary[k]);
+  constexpr double kStepDeg = 2;
+  std::array<int, 2> steps{0, 0};
+  double reach = 0;
+  for (size_t k = 0; k < 2; ++k)
+    if (m.rotary[k].carries == Carrier::Table && hi[k] > lo[k]) steps[k] = int(std::ceil((hi[k] - lo[k]) / kStepDeg));
+  const auto& verts = part.mesh().vertices;
+  for (size_t k = 0; k < 2; ++k)
+    if (m.rotary[k].carries == Carrier::Table)
+      for (const auto& v : verts) reach = std::max(reach, (v - m.rotary[k].pivot).norm());
+  double top = -INFINITY;
+  for (int i = 0; i <= steps[0]; ++i)
+    for (int j = 0; j <= steps[1]; ++j) {
+      std::array<double, 2> deg = {steps[0] ? lo[0] + (hi[0] - lo[0]) * i / steps[0] : lo[0],
+                                   steps[1] ? lo[1] + (hi[1] - lo[1]) * j / steps[1] : lo[1]};
+      const TableTransform T = table_transform(m, deg);
+      const Eigen::RowVector3d row = T.R.row(2);
+      for (const auto& v : verts) top = std::max(top, row.dot(v) + T.t.z());
+    }
+  const int turning = (steps[0] > 0) + (steps[1] > 0);
+  return top + turning * reach * (0.5 * kStepDeg * M_PI / 180);
+}
+
+Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const std::string& name,
+                 const std::vector<std::string>& header);
 
 }  // namespace
 
 Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const std::string& name,
             const std::vector<std::string>& header) {
   if (std::string why = o.validate(); !why.empty()) throw InputError("post options: " + why);
+  if (!o.part) {
+    std::vector<std::string> h = header;
+    h.push_back("links not checked against the part (no part given): check the program in a simulator");
+    return post_once(inputs, m, o, name, h);
+  }
+  // Plan, emit, back-simulate the text; when a motion outside the cut hits the part, plan again with
+  // the distances doubled (twice at most), else refuse.
+  PostOptions attempt = o;
+  for (int tries = 0;; ++tries) {
+    Posted p = post_once(inputs, m, attempt, name, header);
+    const std::string text = nc_text(p.program, {o.dialect, o.line_numbers, o.path.tolerance_mm});
+    std::vector<VerifyTool> tools;
+    for (const PostInput& in : inputs)
+      if (std::none_of(tools.begin(), tools.end(), [&](const VerifyTool& t) { return t.number == in.cl.tool; }))
+        tools.push_back({in.cl.tool, assembly_of(in), in.tool_length_mm > 0 ? in.tool_length_mm : o.path.tool_length_mm});
+    VerifyOptions vo;
+    vo.gouge_tolerance_mm = o.gouge_tolerance_mm;
+    const VerifyReport rep = verify_text(text, o.dialect, name + file_extension(o.dialect), m, *o.part, tools, vo);
+    const bool links_clear = std::none_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.rapid; });
+    if (links_clear || tries >= 2) {
+      p.links_checked = true;
+      for (const VerifiedBlock& b : rep.blocks)
+        if (b.rapid)
+          for (double c : b.min_clearance_mm) p.min_link_clearance_mm = std::min(p.min_link_clearance_mm, c);
+      if (!rep.clean()) {
+        p.refused = rep.first_problem(name + file_extension(o.dialect));
+        p.worst_line = rep.hits.front().line;
+        for (const VerifyHit& h : rep.hits) p.worst_line = std::min(p.worst_line, h.line);
+      }
+      return p;
+    }
+    attempt.safe_height_mm = 2 * attempt.safe_height_mm + attempt.clearance_mm;
+    attempt.lead_mm *= 2;
+    attempt.clearance_mm *= 2;
+  }
+}
+
+namespace {
+
+Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const std::string& name,
+                 const std::vector<std::string>& header) {
   if (inputs.empty()) throw InputError("post: no CL-data");
   const bool tcp = m.controller.tcp || m.controller.linuxcnc_trt;
+  // LinuxCNC's trt kinematics turns two table axes; a head axis needs the controller's own TCP.
+  if (m.controller.linuxcnc_trt && m.tables() != 2)
+    throw MachineError(fmt::format("{}: controller.linuxcnc_trt: LinuxCNC's trt kinematics is for two table axes, and {} "
+                                   "is a {} machine",
+                                   m.file, m.name, m.kind()));
   if (o.dialect == Dialect::LinuxCnc && m.controller.tcp && !m.controller.linuxcnc_trt)
-    throw MachineError(m.file + ": controller.tcp: LinuxCNC has no G43.4; set linuxcnc_trt when its trt kinematics is "
-                                "active, or tcp: false to program joints");
+    throw InputError(
+        m.tables() == 2
+            ? fmt::format("post.dialects: linuxcnc: LinuxCNC has no G43.4 and {} is programmed with TCP; choose another "
+                          "dialect, or set controller.linuxcnc_trt when LinuxCNC's trt kinematics is active",
+                          m.name)
+            : fmt::format("post.dialects: linuxcnc: LinuxCNC has no G43.4 and {} ({}) turns its head under TCP; choose "
+                          "iso, heidenhain or sinumerik",
+                          m.name, m.kind()));
 
   // Kinematics of every section first: the safe height depends on all of them.
   std::vector<Solved> solved;
@@ -112,11 +266,14 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
     for (size_t k = 0; k < in.cl.moves.size(); ++k)
       if (!in.cl.moves[k].rapid && !(in.cl.moves[k].feed_mm_min > 0))
         throw InputError(fmt::format("patch '{}': CL move {} is a feed move without a feed rate (FEDRAT)", in.patch, k));
+    Solved s;
+    s.assembly = assembly_of(in);
+    if (std::string why = s.assembly.validate(); !why.empty()) throw InputError(fmt::format("patch '{}': {}", in.patch, why));
+    s.cl = o.part ? plan_links(in.cl, *o.part, s.assembly, o) : in.cl;
     std::vector<ToolPose> poses;
-    for (const ClMove& mv : in.cl.moves) poses.push_back(mv.pose);
+    for (const ClMove& mv : s.cl.moves) poses.push_back(mv.pose);
     PathOptions po = o.path;
     if (in.tool_length_mm > 0) po.tool_length_mm = in.tool_length_mm;
-    Solved s;
     s.tool_length_mm = po.tool_length_mm;
     s.path = solve_path(m, poses, {}, po);
     require_reachable(s.path, poses, in.patch);
@@ -132,13 +289,34 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
   NcProgram& p = out.program;
   p.name = name;
   p.header = header;
+  if (o.dialect == Dialect::LinuxCnc && m.controller.linuxcnc_trt)
+    p.header.push_back("tip + angles: LinuxCNC's trt kinematics (trtkins) must be active");
   p.machine = m.name;
   p.rotary_names = {m.rotary[0].name, m.rotary[1].name};
   p.tcp = tcp;
   p.inverse_time = m.controller.inverse_time && o.dialect != Dialect::Heidenhain;
-  // Joint values cannot go above the Z travel; the program's own highest point is below it.
-  p.safe_z = top_z + o.safe_height_mm;
-  if (!tcp) p.safe_z = std::max(top_z, std::min(p.safe_z, m.linear[2].max_mm));
+  if (o.part) {
+    // Above the part placed on the machine, over every table angle the program turns through; a
+    // tilted head lowers the assembly's side by up to its largest radius. The controlled point (Z
+    // joint, or the tip under TCP with a vertical table axis) is the tip's height.
+    double r = 0;
+    for (const Solved& s : solved) r = std::max(r, max_radius(s.assembly));
+    p.safe_z = part_top_machine(m, *o.part, solved) + std::max(o.safe_height_mm, o.clearance_mm) + (m.tables() < 2 ? r : 0);
+  } else {
+    // Joint values cannot go above the Z travel; the program's own highest point is below it.
+    p.safe_z = top_z + o.safe_height_mm;
+    if (!tcp) p.safe_z = std::max(top_z, std::min(p.safe_z, m.linear[2].max_mm));
+  }
+  // Under TCP with a part, the moves between safe Z and the cut follow the tool axis (a tilted tool
+  // moved vertically drags its side through the part): the point on the axis line at safe Z.
+  const bool along_axis = tcp && o.part;
+  const auto on_axis_at_safe_z = [&](const Joints& at, double tool_length) {
+    const ToolPose pose = programmed_pose(m, at, tool_length);
+    Joints up = at;
+    if (pose.axis.z() > 0.2) up.linear = at.linear + std::max(0.0, (p.safe_z - at.linear.z()) / pose.axis.z()) * pose.axis;
+    up.linear.z() = p.safe_z;
+    return up;
+  };
 
   int tool = -1;
   bool have_position = false;
@@ -154,16 +332,19 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
     if (in.cl.tool != tool) {
       tool = in.cl.tool;
       const ToolDimensions dim = tool_dimensions(in.cl.profile);
-      p.blocks.push_back(NcToolChange{tool, in.cl.partno, dim.diameter_max_mm, dim.length_mm});
+      // L: the length the program is posted with (spindle nose to tip on head machines), else the cutter's.
+      p.blocks.push_back(NcToolChange{tool, in.cl.partno, dim.diameter_max_mm,
+                                      s.tool_length_mm > 0 && m.tables() < 2 ? s.tool_length_mm : dim.length_mm});
       have_position = false;  // after a tool change the spindle may be anywhere: approach from safe Z
     }
     p.blocks.push_back(NcSpindle{in.cl.spindle_rpm, in.cl.clockwise});
     p.blocks.push_back(NcCoolant{in.cl.coolant});
+    const ClProgram& cl = s.cl;
 
     // Feeds per output block: the CL move's feed; rapids get a nominal one (their F is not written).
     std::vector<double> feed(s.path.joints.size(), 1.0);
     for (size_t j = 1; j < feed.size(); ++j) {
-      const ClMove& mv = in.cl.moves[size_t(s.owner[j])];
+      const ClMove& mv = cl.moves[size_t(s.owner[j])];
       if (!mv.rapid) feed[j] = mv.feed_mm_min;
     }
     const std::vector<BlockFeed> bf = block_feeds(m, s.path, feed);
@@ -179,22 +360,34 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
       current = at;
     };
     size_t j = 0;
-    for (size_t k = 0; k < in.cl.moves.size(); ++k) {
+    for (size_t k = 0; k < cl.moves.size(); ++k) {
       // Output poses j..jk end in CL move k (jk is the input pose itself).
       size_t jk = j;
       while (s.path.input_index[jk] != int(k)) ++jk;
-      const ClMove& mv = in.cl.moves[k];
+      const ClMove& mv = cl.moves[k];
       const Joints& target = s.at[jk];
       if (mv.rapid || !have_position) {
         if (!have_position || !same_rotaries(current, target)) {
           // Safe approach: up to safe Z, turn the rotaries, over to X Y, down to the target.
-          Joints up = have_position ? current : target;
-          up.linear.z() = p.safe_z;
-          add_move(true, AxisZ, up, programmed_pose(m, up, s.tool_length_mm), -1);
-          up.rotary = target.rotary;
-          add_move(true, AxesRotary, up, programmed_pose(m, up, s.tool_length_mm), -1);
-          up.linear.x() = target.linear.x(), up.linear.y() = target.linear.y();
-          add_move(true, AxisX | AxisY, up, programmed_pose(m, up, s.tool_length_mm), -1);
+          if (along_axis) {
+            const Joints above = on_axis_at_safe_z(target, s.tool_length_mm);
+            Joints up = have_position ? on_axis_at_safe_z(current, s.tool_length_mm) : above;
+            if (have_position && (up.linear - current.linear).norm() > 1e-9)
+              add_move(true, AxesLinear, up, programmed_pose(m, up, s.tool_length_mm), -1);
+            else if (!have_position)
+              add_move(true, AxisZ, up, programmed_pose(m, up, s.tool_length_mm), -1);
+            up.rotary = target.rotary;
+            add_move(true, AxesRotary, up, programmed_pose(m, up, s.tool_length_mm), -1);
+            add_move(true, AxisX | AxisY, above, programmed_pose(m, above, s.tool_length_mm), -1);
+          } else {
+            Joints up = have_position ? current : target;
+            up.linear.z() = p.safe_z;
+            add_move(true, AxisZ, up, programmed_pose(m, up, s.tool_length_mm), -1);
+            up.rotary = target.rotary;
+            add_move(true, AxesRotary, up, programmed_pose(m, up, s.tool_length_mm), -1);
+            up.linear.x() = target.linear.x(), up.linear.y() = target.linear.y();
+            add_move(true, AxisX | AxisY, up, programmed_pose(m, up, s.tool_length_mm), -1);
+          }
         }
         add_move(true, AxesLinear, target, s.path.poses[jk], int(k));
         have_position = true;
@@ -223,10 +416,11 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
       }
       j = jk + 1;
     }
-    // Retract to safe Z: the next section (or the end) starts from there.
+    // Retract to safe Z (under TCP with a part: along the tool): the next section (or the end) starts there.
     Joints up = current;
     up.linear.z() = p.safe_z;
-    add_move(true, AxisZ, up, programmed_pose(m, up, s.tool_length_mm), -1);
+    if (along_axis) up = on_axis_at_safe_z(current, s.tool_length_mm);
+    add_move(true, along_axis ? unsigned(AxesLinear) : unsigned(AxisZ), up, programmed_pose(m, up, s.tool_length_mm), -1);
     sec.path = s.path;
     sec.end_block = int(p.blocks.size());
     out.sections.push_back(std::move(sec));
@@ -235,5 +429,7 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
   p.blocks.push_back(NcCoolant{false});
   return out;
 }
+
+}  // namespace
 
 }  // namespace flankcam

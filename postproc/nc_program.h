@@ -3,10 +3,13 @@
 // from APT CL-data through a machine's kinematics; the emitters (postproc/gcode.h) only format it.
 #pragma once
 #include <array>
+#include <cmath>
 #include <string>
 #include <variant>
 #include <vector>
 
+#include "core/closest_point.h"
+#include "core/collision.h"
 #include "kinematics/path.h"
 #include "postproc/apt.h"
 
@@ -40,7 +43,8 @@ struct NcComment {
 struct NcToolChange {
   int number = 1;
   std::string name;
-  double diameter_mm = 0, length_mm = 0;  // the cutter, for the comment and the tool table
+  double diameter_mm = 0;  // the cutter's largest
+  double length_mm = 0;    // the length the program is posted with (nose to tip on head machines), else the cutter's
 };
 struct NcSpindle {
   double rpm = 0;  // 0: stop
@@ -79,7 +83,17 @@ struct PostOptions {
   bool line_numbers = false;         // N words (Heidenhain always numbers its blocks)
   PathOptions path;                  // kinematics: tool length, linearisation tolerances
   double max_inverse_time = 99999.999;  // controller's largest G93 F; shorter blocks are slowed to it
-  double safe_height_mm = 10;        // safe Z above the highest clearance point of the program
+  // Without a part: safe Z this far above the highest programmed point. With a part: this far above
+  // the part's highest point in the machine frame over the rotary angles the program uses (plus the
+  // largest assembly radius when a head axis tilts the tool).
+  double safe_height_mm = 10;
+  // The part in the work frame (setup applied), not owned. Null: links are not planned against the
+  // part and not checked (the header says so), as for foreign CL-data.
+  const SurfaceIndex* part = nullptr;
+  double clearance_mm = 1;           // links: the assembly this far from the part (normal offset margin)
+  double lead_mm = 2;                // approach / retract off the surface along its normal (at least the
+                                     // cutter's radius variation + clearance, so an axial move cannot cut)
+  double gouge_tolerance_mm = 0.01;  // back-simulation: the cutter may be this deep in the part in the cut
   std::string validate() const;      // empty when valid
 };
 
@@ -88,6 +102,8 @@ struct PostInput {
   ClProgram cl;
   std::string patch;  // for messages: "patch 'NAME': pose I ... out of reach"
   double tool_length_mm = 0;  // spindle nose to tip (head axes); 0: PostOptions::path.tool_length_mm
+  ToolAssembly assembly{};    // cutter, shank, holder for the link planning and the back-simulation;
+                              // no cutter: the CL-data's profile without shank and holder
 };
 
 struct PostedSection {
@@ -99,6 +115,11 @@ struct PostedSection {
 struct Posted {
   NcProgram program;
   std::vector<PostedSection> sections;
+  // With a part: the program's text was back-simulated (postproc/verify.h) in PostOptions::dialect.
+  bool links_checked = false;
+  int worst_line = 0;        // the first colliding or gouging line, 0 when clean
+  std::string refused;       // "LINE: holder collision D mm at (..) in motion block B (rapid)", "" when clean
+  double min_link_clearance_mm = INFINITY;  // over every rapid block and component
 };
 
 // Builds the program for one or several CL programs in order (a tool change for each new tool):
@@ -106,6 +127,11 @@ struct Posted {
 // feeds stretched by the axis speeds, a safe approach for every rapid that changes the orientation
 // (safe Z, rotaries, X Y, Z) and a retract to safe Z at the end. Throws MachineError naming the
 // patch and pose when a pose is out of reach.
+// With PostOptions::part the links are planned against it: the CL-data's own approach and leave
+// moves (rapids before the first feed move, axial lead-in/out) are replaced by a lead-in and a
+// lead-out along the surface normal; under TCP the moves between safe Z and the cut follow the
+// tool axis; the emitted text is back-simulated and, when a motion still hits the part, planned
+// again with doubled distances, else returned with `refused` set (nothing is thrown).
 [[nodiscard]] Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o,
                           const std::string& name, const std::vector<std::string>& header);
 

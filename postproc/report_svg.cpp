@@ -56,7 +56,7 @@ double tick_step(double span, int n) {
 
 std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& dev, double tol,
                               const std::vector<ToolPose>& poses, const std::vector<Eigen::Vector2d>& profile,
-                              const std::string& title, int columns) {
+                              const std::string& title, int columns, const std::vector<SvgHitMarker>& hits) {
   // View along the area-weighted mean normal of the faces with a deviation (all faces if none).
   Eigen::Vector3d normal = Eigen::Vector3d::Zero();
   for (int pass = 0; pass < 2 && normal.norm() < 1e-12; ++pass)
@@ -167,6 +167,18 @@ std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& de
                      pts);
     s += line(sx(axes[i][0].x()), sy(axes[i][0].y()), sx(axes[i][1].x()), sy(axes[i][1].y()),
               R"(stroke="#222222" stroke-dasharray="6 3")");
+  }
+  // Collisions and gouges: a ring with a cross, labelled (at most 12 labels, the rest unlabelled).
+  for (size_t i = 0; i < hits.size(); ++i) {
+    const Eigen::Vector2d q = project(hits[i].point);
+    const double x = sx(q.x()), y = sy(q.y());
+    const std::string colour = hits[i].gouge ? "#ff8c00" : "#d000d0";
+    s += fmt::format(R"(<circle cx="{}" cy="{}" r="7" fill="none" stroke="{}" stroke-width="2.5"/>)"
+                     "\n",
+                     num(x), num(y), colour);
+    s += line(x - 5, y - 5, x + 5, y + 5, fmt::format(R"(stroke="{}" stroke-width="2")", colour));
+    s += line(x - 5, y + 5, x + 5, y - 5, fmt::format(R"(stroke="{}" stroke-width="2")", colour));
+    if (i < 12) s += text(x + 9, y - 6, hits[i].label, fmt::format(R"(font-size="10" fill="{}")", colour));
   }
   // Legend: -4 tol .. +4 tol.
   const double ly = height - legend + 10, lw = 300;

@@ -17,13 +17,21 @@ namespace flankcam {
 // overcut (< 0), saturated at 4x the tolerance; grey where undefined (NaN).
 [[nodiscard]] std::array<unsigned char, 3> deviation_color(double dev_mm, double tol_mm);
 
+// A point where a motion hit the part (collision of the assembly, or a gouge of the cutter), drawn
+// as a ringed cross with its label (e.g. "L123 holder 0.52").
+struct SvgHitMarker {
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();  // mm, the surface's frame
+  std::string label;
+  bool gouge = false;  // orange; collisions magenta
+};
+
 // The surface seen along its mean normal (over the faces with a deviation), rasterised to at most
 // `columns` cells across, each cell the deviation at the nearest surface point; the tool's outline
-// (meridian `profile`) at `tool_poses`.
+// (meridian `profile`) at `tool_poses`; collisions and gouges at `hits`.
 [[nodiscard]] std::string deviation_map_svg(const TriMesh& surface_mm, const std::vector<double>& deviation_mm, double tol_mm,
                                             const std::vector<ToolPose>& tool_poses,
                                             const std::vector<Eigen::Vector2d>& profile, const std::string& title,
-                                            int columns = 160);
+                                            int columns = 160, const std::vector<SvgHitMarker>& hits = {});
 
 // The tool standing on its tip: full silhouette, axis, length, end diameters and cone angle.
 [[nodiscard]] std::string tool_profile_svg(const std::vector<Eigen::Vector2d>& profile, const std::string& title);

@@ -94,8 +94,11 @@ TEST_CASE("flankcam run end to end: the program, back-simulated through the mach
           const double s = std::clamp((tip - a).dot(b - a) / (b - a).squaredNorm(), 0.0, 1.0);
           best = std::min(best, (a + s * (b - a) - tip).norm());
         }
+        // The lead-out runs off the surface along its normal: the line from the last fitted tip to
+        // where the program's last feed block ends (the lead-in is approached by a rapid).
         const double lead_in = (tip - fitted.front().tip).cross(fitted.front().axis).norm();
-        const double lead_out = (tip - fitted.back().tip).cross(fitted.back().axis).norm();
+        const Eigen::Vector3d out_dir = (sim.back().tip - fitted.back().tip).normalized();
+        const double lead_out = (tip - fitted.back().tip).cross(out_dir).norm();
         worst = std::max(worst, std::min({best, lead_in, lead_out}));
       }
     MESSAGE(file << ": " << fitted.size() << " fitted poses reached; joint interpolation within " << worst << " mm");

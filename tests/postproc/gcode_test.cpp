@@ -219,7 +219,7 @@ TEST_CASE("bad programs and impossible posts are refused with the line or the fi
 
   Machine tcp = shipped("xyzbc-head-table");  // TCP by G43.4, which LinuxCNC lacks
   CHECK_THROWS_WITH_AS((void)post({{test::small_patch(), "small", 0}}, tcp, options(Dialect::LinuxCnc), "X", {}),
-                       doctest::Contains("LinuxCNC has no G43.4"), MachineError);
+                       doctest::Contains("post.dialects: linuxcnc: LinuxCNC has no G43.4"), InputError);
   // A pose beyond the A table's tilt: the patch and pose are named.
   ClProgram steep = test::small_patch();
   steep.moves[3].pose.axis = Eigen::Vector3d(0, -0.8, -0.6);

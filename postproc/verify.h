@@ -1,0 +1,110 @@
+// Back-simulation of an NC program from its text: every motion block (rapids, links, lead-in/out,
+// tool changes, the cut) through the machine's forward kinematics as the controller interpolates it
+// (joints linearly; under TCP the tip on a line and the rotary angles linearly), the tool assembly
+// (cutter, shank, holder) swept against the part at positions no farther apart than `step_mm` for
+// any point of the assembly. Everything in mm, in the frame the program is written in (the work
+// frame: the part placed on the machine with its setup).
+//
+// Feed blocks are the cut: the cutter may enter the part by the gouge tolerance (the fit's
+// tolerance), shank and holder must not touch. Rapids must not touch the part at all.
+#pragma once
+#include <Eigen/Core>
+#include <array>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/closest_point.h"
+#include "core/collision.h"
+#include "kinematics/machine.h"
+#include "postproc/apt.h"
+#include "postproc/gcode.h"
+
+namespace flankcam {
+
+struct VerifyTool {
+  int number = 0;          // T number; 0: the tool for any T without its own entry
+  ToolAssembly assembly;   // cutter meridian (z, r) from the tip, shank, holder
+  double length_mm = 0;    // spindle nose to tip as the program is posted (head axes)
+};
+
+struct VerifyOptions {
+  double gouge_tolerance_mm = 0.01;  // feed blocks: the cutter may be this deep in the part
+  double link_clearance_mm = 0;      // rapids: every part of the assembly at least this far from the part
+  double step_mm = 0.25;             // no point of the assembly moves more than this between checked positions
+  double cutter_slab_mm = 0.25;      // axial sampling of the cutter (shank and holder: 1 mm)
+  double report_clearance_mm = 25;   // clearances beyond this are reported as this (the search stops there)
+  std::string validate() const;
+};
+
+// One motion block as simulated.
+struct VerifiedBlock {
+  int block = 0;   // index among the motion blocks, 0-based
+  int line = 0;    // 1-based line in the program text (APT: the GOTO's index + 1)
+  bool rapid = false;
+  int tool = 0;
+  std::array<double, 3> min_clearance_mm{};  // cutter, shank, holder (Component order); negative: inside
+  double minutes = 0;
+};
+
+struct VerifyHit {
+  int block = 0, line = 0;
+  bool rapid = false;
+  Component component = Component::Tool;
+  double depth_mm = 0;                            // how far inside the part (beyond nothing: raw depth)
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();  // the part point there (program frame)
+  [[nodiscard]] std::string kind() const;          // "gouge" (the cutter in a feed block) or "collision"
+};
+
+struct AxisViolation {
+  int block = 0, line = 0;
+  std::string axis;      // X, Y, Z or the rotary's name
+  bool speed = false;    // false: a travel limit
+  double value = 0, limit = 0;  // mm or deg (limits), mm/min or deg/min (speeds)
+};
+
+struct Deviation {  // the machined design surface Φ (when one is given)
+  std::vector<double> deviation_mm;  // per vertex: > 0 material left, < 0 overcut, NaN not reached
+  int reached = 0, within = 0;       // vertices reached, and of those within the tolerance
+  double tolerance_mm = 0;
+  [[nodiscard]] double coverage() const { return reached > 0 ? double(within) / reached : 0; }
+};
+
+struct VerifyReport {
+  std::vector<VerifiedBlock> blocks;
+  std::vector<VerifyHit> hits;            // worst per block and component
+  std::vector<AxisViolation> violations;  // travel limits and speeds
+  double cycle_minutes = 0, cut_minutes = 0;
+  long positions = 0;                     // simulated positions
+  Deviation design;                       // empty unless a design surface was given
+  [[nodiscard]] bool clean() const { return hits.empty(); }
+  // "LINE N (block B): holder collision 1.234 mm at (x, y, z), rapid" for the deepest hit, or "".
+  [[nodiscard]] std::string first_problem(const std::string& file) const;
+};
+
+// Refusal of a program whose motions collide or gouge (the CLI exits with 4).
+struct ProgramRefused : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// The program's dialect from its file name: .nc iso, .ngc linuxcnc, .h heidenhain, .mpf sinumerik;
+// false for .apt / .cls (CL-data). Throws InputError for others.
+[[nodiscard]] bool is_cl_data_file(const std::string& path);
+[[nodiscard]] Dialect dialect_of_file(const std::string& path);
+
+// `tools`: one per T number the program calls (or number 0 for all). `design` may be null.
+[[nodiscard]] VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& m, bool linuxcnc_trt,
+                                          const SurfaceIndex& part, const std::vector<VerifyTool>& tools,
+                                          const VerifyOptions& o, const SurfaceIndex* design = nullptr);
+// Reads the text (parse_nc) and simulates it.
+[[nodiscard]] VerifyReport verify_text(const std::string& text, Dialect d, const std::string& file, const Machine& m,
+                                       const SurfaceIndex& part, const std::vector<VerifyTool>& tools,
+                                       const VerifyOptions& o, const SurfaceIndex* design = nullptr);
+// APT CL-data: tip on a line and the axis turned on a great circle per GOTO, no machine.
+[[nodiscard]] VerifyReport verify_cl(const ClProgram& cl, const SurfaceIndex& part, const VerifyTool& tool,
+                                     const VerifyOptions& o, const SurfaceIndex* design = nullptr);
+
+// The cutter of a meridian (z, r) from the tip, as an assembly with the given shank and holder.
+[[nodiscard]] ToolAssembly assembly_from_meridian(const std::vector<Eigen::Vector2d>& meridian_mm, const ToolAssembly& holder);
+
+}  // namespace flankcam

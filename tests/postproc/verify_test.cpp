@@ -1,0 +1,285 @@
+#include "postproc/verify.h"
+
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <regex>
+#include <sstream>
+
+#include "core/errors.h"
+#include "kinematics/machine.h"
+#include "postproc/gcode.h"
+#include "postproc/nc_program.h"
+
+using namespace flankcam;
+
+namespace {
+
+Machine shipped(const std::string& name) { return load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/" + name + ".yaml"); }
+
+// A wall x = r(z) (y in [-40, 40], z in [0, 20]): the envelope of a tool with meridian r standing at
+// x = 0 with a vertical axis, tip at z = 0, moving along y. Triangles face +x... either way.
+TriMesh wall(const std::function<double(double)>& r) {
+  TriMesh m;
+  const int ny = 80, nz = 40;
+  for (int j = 0; j <= nz; ++j)
+    for (int i = 0; i <= ny; ++i) {
+      const double z = 20.0 * j / nz, y = -40 + 80.0 * i / ny;
+      m.vertices.emplace_back(r(z), y, z);
+    }
+  for (int j = 0; j < nz; ++j)
+    for (int i = 0; i < ny; ++i) {
+      const int a = j * (ny + 1) + i, b = a + 1, c = a + ny + 1, d = c + 1;
+      m.faces.push_back({a, b, d});
+      m.faces.push_back({a, d, c});
+    }
+  return m;
+}
+
+std::vector<Eigen::Vector2d> meridian(const std::function<double(double)>& r) {
+  std::vector<Eigen::Vector2d> out;
+  for (int k = 0; k <= 40; ++k) out.emplace_back(25.0 * k / 40, r(25.0 * k / 40));
+  return out;
+}
+
+double cone(double z) { return 3 + 0.1 * z; }
+double hourglass(double z) { return 4 - 1.0 * std::sin(M_PI * z / 25); }
+
+// The flank pass along the wall (placed in the work frame at `origin`), with the CL-data's own axial
+// lead-in and leave as flank_program writes them.
+ClProgram pass(const std::function<double(double)>& r, const Eigen::Vector3d& origin) {
+  std::vector<ToolPose> poses;
+  for (int i = 0; i <= 20; ++i) poses.push_back({origin + Eigen::Vector3d(0, -20 + 2.0 * i, 0), Eigen::Vector3d::UnitZ()});
+  return flank_program("WALL", poses, meridian(r), 600, 10000, 5, 30);
+}
+
+TriMesh moved(TriMesh m, const Eigen::Vector3d& by) {
+  for (auto& v : m.vertices) v += by;
+  return m;
+}
+
+ToolAssembly holder() {
+  ToolAssembly a;
+  a.shank_length = 10, a.shank_diameter = 8;
+  a.holder_length = 20, a.holder_diameter = 20, a.holder_diameter_far = 30;
+  return a;
+}
+
+struct Case {
+  std::string label;
+  Machine machine;
+  Dialect dialect;
+};
+std::vector<Case> cases() {
+  return {{"xyzac-trt", shipped("xyzac-trt"), Dialect::LinuxCnc},
+          {"xyzbc-trt", shipped("xyzbc-trt"), Dialect::Iso},
+          {"xyzbc-trt-sinumerik", shipped("xyzbc-trt"), Dialect::Sinumerik},
+          {"xyzbc-head-table", shipped("xyzbc-head-table"), Dialect::Iso},
+          {"xyzca-head-head", shipped("xyzca-head-head"), Dialect::Heidenhain},
+          {"xyzbc-nutating", shipped("xyzbc-nutating"), Dialect::Sinumerik}};
+}
+
+struct Posting {
+  Posted posted;
+  std::string text;
+  std::vector<VerifyTool> tools;
+};
+Posting post_wall(const Case& c, const SurfaceIndex& part, const std::function<double(double)>& r, const Eigen::Vector3d& origin) {
+  PostOptions o;
+  o.dialect = c.dialect;
+  o.path.tool_length_mm = 80;
+  o.part = &part;
+  o.gouge_tolerance_mm = 0.01;
+  PostInput in{pass(r, origin), "wall", 80, assembly_from_meridian(meridian(r), holder())};
+  Posting p;
+  p.posted = post({in}, c.machine, o, "WALL", {"verify test"});
+  p.text = nc_text(p.posted.program, {c.dialect, false, o.path.tolerance_mm});
+  p.tools = {{1, in.assembly, 80}};
+  return p;
+}
+
+// The text with line `line` (1-based) replaced.
+std::string with_line(const std::string& text, int line, const std::string& replacement) {
+  std::istringstream in(text);
+  std::string out, l;
+  for (int n = 1; std::getline(in, l); ++n) out += (n == line ? replacement : l) + "\n";
+  return out;
+}
+std::string line_of(const std::string& text, int line) {
+  std::istringstream in(text);
+  std::string l;
+  for (int n = 1; std::getline(in, l); ++n)
+    if (n == line) return l;
+  return {};
+}
+
+// The line of the k-th feed block in the middle of the cut (lines with a feed word).
+int cutting_line(const std::string& text, const std::vector<NcPoint>& pts) {
+  std::vector<int> feeds;
+  for (const NcPoint& p : pts)
+    if (!p.rapid) feeds.push_back(p.line);
+  REQUIRE(feeds.size() > 4);
+  (void)text;
+  return feeds[feeds.size() / 2];
+}
+
+// Lowers the Z word of a line by 1 mm (G-code "Z12.3456", Heidenhain "Z+12.3456").
+std::string lower_z(const std::string& line) {
+  const std::regex z(R"(Z([+-]?)(\d+\.\d+))");
+  std::smatch m;
+  REQUIRE(std::regex_search(line, m, z));
+  const double v = std::stod(m[1].str() + m[2].str()) - 1;
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "Z%s%.4f", v >= 0 && !m[1].str().empty() ? "+" : "", v);
+  return m.prefix().str() + buf + m.suffix().str();
+}
+
+}  // namespace
+
+TEST_CASE("every shipped machine and dialect: the posted wall pass back-simulates clean, links clear of the part") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cone), origin));
+  for (const Case& c : cases()) {
+    CAPTURE(c.label);
+    const Posting p = post_wall(c, part, cone, origin);
+    CHECK(p.posted.links_checked);
+    CHECK(p.posted.refused.empty());
+    MESSAGE(c.label << ": min link clearance " << p.posted.min_link_clearance_mm << " mm, safe Z " << p.posted.program.safe_z);
+    CHECK(p.posted.min_link_clearance_mm > 0);
+    // Safe Z is above the part's top (z = 15 here; the tables turn it in the machine frame).
+    CHECK(p.posted.program.safe_z > 15);
+    const VerifyReport rep = verify_text(p.text, c.dialect, "wall", c.machine, part, p.tools, {});
+    CHECK(rep.clean());
+    CHECK(rep.violations.empty());
+    CHECK(rep.cut_minutes > 0);
+    CHECK(rep.cycle_minutes > rep.cut_minutes);
+    // The cut touches the wall: the cutter's clearance in the feed blocks is within the tolerance of 0.
+    double feed_min = INFINITY, rapid_min = INFINITY;
+    for (const VerifiedBlock& b : rep.blocks) (b.rapid ? rapid_min : feed_min) = std::min(b.rapid ? rapid_min : feed_min, b.min_clearance_mm[0]);
+    CHECK(std::abs(feed_min) < 0.011);
+    CHECK(rapid_min > 0);
+  }
+}
+
+TEST_CASE("a cutting block with Z lowered by 1 mm is a gouge on exactly that line, in every dialect") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cone), origin));
+  for (const Case& c : cases()) {
+    CAPTURE(c.label);
+    const Posting p = post_wall(c, part, cone, origin);
+    const std::vector<NcPoint> pts = parse_nc(p.text, c.dialect, p.posted.program.rotary_names, "wall");
+    const int line = cutting_line(p.text, pts);
+    const std::string edited = with_line(p.text, line, lower_z(line_of(p.text, line)));
+    const VerifyReport rep = verify_text(edited, c.dialect, "wall", c.machine, part, p.tools, {});
+    REQUIRE_FALSE(rep.clean());
+    // The lowered block and the one after it (which climbs back) are the only ones that cut too deep.
+    for (const VerifyHit& h : rep.hits) {
+      CHECK(h.component == Component::Tool);
+      CHECK(h.kind() == "gouge");
+      CHECK(h.depth_mm > 0.05);  // cone r' = 0.1: 1 mm lower is ~0.1 mm deeper
+      CHECK(h.depth_mm < 0.11);
+      const bool here = h.line == line || h.line == pts[size_t(std::find_if(pts.begin(), pts.end(), [&](const NcPoint& q) { return q.line == line; }) - pts.begin()) + 1].line;
+      CHECK(here);
+    }
+    CHECK(rep.first_problem("wall").rfind("wall:" + std::to_string(line) + ":", 0) == 0);
+  }
+}
+
+TEST_CASE("a rapid through the part is a collision on its line") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cone), origin));
+  const Case c = cases()[1];  // xyzbc-trt, iso: joints
+  const Posting p = post_wall(c, part, cone, origin);
+  const std::vector<NcPoint> pts = parse_nc(p.text, c.dialect, p.posted.program.rotary_names, "wall");
+  // Replace the first lead-in feed block's line by a rapid that crosses the wall (x + 20).
+  const int line = cutting_line(p.text, pts);
+  const NcPoint& at = *std::find_if(pts.begin(), pts.end(), [&](const NcPoint& q) { return q.line == line; });
+  char buf[128];
+  std::snprintf(buf, sizeof buf, "G0 X%.4f Y%.4f Z%.4f", at.at.linear.x() + 20, at.at.linear.y(), at.at.linear.z());
+  const std::string edited = with_line(p.text, line, buf);
+  const VerifyReport rep = verify_text(edited, c.dialect, "wall", c.machine, part, p.tools, {});
+  REQUIRE_FALSE(rep.clean());
+  bool found = false;
+  for (const VerifyHit& h : rep.hits)
+    if (h.line == line && h.rapid && h.kind() == "collision") found = true;
+  CHECK(found);
+  MESSAGE("rapid through the wall: " << rep.first_problem("wall"));
+}
+
+TEST_CASE("hourglass tool: the CL-data's axial lead-in gouges the finished flank, the planned normal lead does not") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(hourglass), origin));
+  const VerifyTool tool{1, assembly_from_meridian(meridian(hourglass), holder()), 80};
+  // The CL-data as flank_program writes it: feed in 5 mm along the axis.
+  const VerifyReport axial = verify_cl(pass(hourglass, origin), part, tool, {});
+  REQUIRE_FALSE(axial.clean());
+  double deepest = 0;
+  for (const VerifyHit& h : axial.hits) deepest = std::max(deepest, h.depth_mm);
+  MESSAGE("axial lead-in of an hourglass tool: " << axial.first_problem("wall.apt"));
+  CHECK(deepest > 0.1);
+  for (const Case& c : cases()) {
+    CAPTURE(c.label);
+    const Posting p = post_wall(c, part, hourglass, origin);
+    CHECK(p.posted.refused.empty());
+    const VerifyReport rep = verify_text(p.text, c.dialect, "wall", c.machine, part, p.tools, {});
+    CHECK(rep.clean());
+  }
+}
+
+TEST_CASE("the machined design surface: the wall is reached and within tolerance where the pass runs") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cone), origin));
+  const Case c = cases()[1];
+  const Posting p = post_wall(c, part, cone, origin);
+  const VerifyReport rep = verify_text(p.text, c.dialect, "wall", c.machine, part, p.tools, {}, &part);
+  CHECK(rep.design.reached > 0);
+  // The pass runs y in [-20, 20] of the wall's [-40, 40] (work y in [-10, 30]): the far ends are not reached.
+  CHECK(rep.design.reached < int(part.mesh().vertices.size()));
+  int inside = 0;
+  for (size_t v = 0; v < part.mesh().vertices.size(); ++v) {
+    const Eigen::Vector3d& x = part.mesh().vertices[v];
+    if (x.y() < -5 || x.y() > 25 || x.z() < -4.5 || x.z() > 14.5) continue;  // well inside the swept strip
+    ++inside;
+    CHECK(std::abs(rep.design.deviation_mm[v]) <= 0.01);
+  }
+  CHECK(inside > 500);
+  MESSAGE("design coverage " << rep.design.coverage() << " of " << rep.design.reached << " reached vertices");
+}
+
+TEST_CASE("post without a part says that links were not checked; refusals name the key") {
+  const Case c = cases()[1];
+  PostOptions o;
+  o.dialect = c.dialect;
+  const Posted p = post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, c.machine, o, "WALL", {});
+  CHECK_FALSE(p.links_checked);
+  const bool said = std::any_of(p.program.header.begin(), p.program.header.end(),
+                                [](const std::string& h) { return h.find("not checked") != std::string::npos; });
+  CHECK(said);
+  // LinuxCNC on a head machine under TCP: names post.dialects and does not suggest linuxcnc_trt.
+  o.dialect = Dialect::LinuxCnc;
+  o.path.tool_length_mm = 80;
+  try {
+    (void)post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped("xyzbc-head-table"), o, "WALL", {});
+    FAIL("linuxcnc on a TCP head machine was accepted");
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    CHECK(what.find("post.dialects") != std::string::npos);
+    CHECK(what.find("linuxcnc_trt") == std::string::npos);
+  }
+  // linuxcnc_trt on a head machine is refused.
+  Machine head = shipped("xyzbc-head-table");
+  head.controller.linuxcnc_trt = true;
+  CHECK_THROWS_AS((void)post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, head, o, "WALL", {}), MachineError);
+}
+
+TEST_CASE("the tool-change comment gives the length the program is posted with") {
+  PostOptions o;
+  o.dialect = Dialect::Iso;
+  o.path.tool_length_mm = 122.109;
+  const Posted head = post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped("xyzbc-head-table"), o, "W", {});
+  const std::string text = nc_text(head.program, {Dialect::Iso, false, 0.005});
+  CHECK(text.find(" L122.109)") != std::string::npos);
+  // Table-table: the tool length does not enter the kinematics; the comment keeps the cutter's (25 mm).
+  const Posted trt = post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped("xyzbc-trt"), o, "W", {});
+  CHECK(nc_text(trt.program, {Dialect::Iso, false, 0.005}).find(" L25.000)") != std::string::npos);
+}
