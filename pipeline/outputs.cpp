@@ -192,8 +192,9 @@ std::vector<std::vector<std::string>> write_run(const RunResult& run, OutputDir&
                             "grey not reached by the patch.",
                             job.tolerance_mm)};
   if (fitted.cover)
-    html.intro.push_back(fmt::format("Patches detected automatically (patches: auto), as {} in {}: the {}.",
-                                     detected_job_name, "the output folder", cover_summary(job, fitted)));
+    html.intro.push_back(fmt::format("Patches detected automatically (patches: auto; written out as init: lines in {}). "
+                                     "W{}.",
+                                     detected_job_name, cover_summary(job, fitted).substr(1)));
   html.columns = {"patch", "tool", "eps (rel.)", "eps mm", "coverage", "collisions", "programs"};
 
   std::vector<std::vector<std::string>> all_files;
