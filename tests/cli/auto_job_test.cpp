@@ -83,3 +83,23 @@ TEST_CASE("patches: auto job errors name the file, line and key and write nothin
     CHECK_FALSE(std::filesystem::exists(dir.file("out")));
   }
 }
+
+TEST_CASE("flankcam run of examples/auto posts the detected patch and reports the whole surface") {
+  test::ScratchDir dir("auto-run");
+  const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/auto/job.yaml";
+  const auto r = test::run_flankcam("run " + job + " --out " + dir.file("out") + " --threads 2", dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  CHECK(report["cover"]["patches"] == report["patches"].size());
+  CHECK(double(report["cover"]["coverage"]) >= 0.95);
+  REQUIRE(report["patches"].size() >= 1);
+  CHECK(report["patches"][0]["collisions"].empty());
+  CHECK(std::filesystem::exists(dir.file("out/auto-1.mpf")));
+  CHECK(test::read_text(dir.file("out/report.html")).find("Whole surface: ") != std::string::npos);
+  // The same detection at one thread: detected-job.yaml byte for byte.
+  const auto r1 = test::run_flankcam("run " + job + " --out " + dir.file("one") + " --threads 1", dir);
+  REQUIRE(r1.code == 0);
+  CHECK(test::read_text(dir.file("one/detected-job.yaml")) == test::read_text(dir.file("out/detected-job.yaml")));
+  CHECK(test::read_text(dir.file("one/auto-1.mpf")) == test::read_text(dir.file("out/auto-1.mpf")));
+}
