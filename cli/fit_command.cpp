@@ -32,6 +32,10 @@ int run_fit(FitArgs args) {
                to_string(p.fit.fit.tool.shape), p.fit.fit.eps_opt.max, fit.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max),
                100 * p.fit.coverage, fmt::join(files[k], " "));
   }
+  if (fit.fitted.cover) {
+    fmt::print("{}\n", pipeline::cover_summary(fit.job, fit.fitted));
+    fmt::print("detected patches as a job: {}\n", (std::filesystem::path(args.out) / pipeline::detected_job_name).string());
+  }
   fmt::print("report: {}\n", (std::filesystem::path(args.out) / "report.json").string());
   // A colliding or gouging motion must not go to a machine unnoticed: one line per patch, exit 4.
   for (const pipeline::FittedPatch& p : fit.fitted.patches) {

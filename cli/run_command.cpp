@@ -41,7 +41,9 @@ int run_job(RunArgs args) {
                p.collisions.clear() ? "none" : fmt::format("{} interval(s)", p.collisions.intervals.size()),
                programs.empty() ? "(none: collides)" : fmt::format("{}", fmt::join(programs, " ")));
   }
-  fmt::print("programs, report.json and report.html in {}\n", args.out);
+  if (fitted.cover) fmt::print("{}\n", pipeline::cover_summary(run.fit.job, fitted));
+  fmt::print("programs, report.json and report.html in {}{}\n", args.out,
+             fitted.cover ? fmt::format(" (detected patches as a job: {})", pipeline::detected_job_name) : "");
   const int colliding = run.fit.colliding();
   if (colliding > 0 && !args.options.allow_collisions) {
     fmt::print(stderr, "flankcam: {} patch(es) collide; no program was written for them (--allow-collisions to override)\n",

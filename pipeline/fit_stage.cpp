@@ -7,6 +7,7 @@
 #include <cmath>
 #include <optional>
 
+#include "core/detect.h"
 #include "core/errors.h"
 #include "core/number_format.h"
 #include "postproc/apt.h"
@@ -123,6 +124,63 @@ std::vector<std::string> collision_summary(const FittedPatch& p) {
   return out;
 }
 
+namespace {
+void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, const Progress& progress) {
+  const std::string& name = fp.job->name;
+  const FitResult& r = fp.fit.fit;
+  progress(fmt::format("patch {}: eps {:.2e} -> {:.2e} of the diagonal ({:.4f} mm), coverage {:.1f}% within {} mm, "
+                       "{:.1f} s + {:.1f} s",
+                       name, r.eps_ini.max, r.eps_opt.max, out.frame.length_to_mm(r.eps_opt.max), 100 * fp.fit.coverage,
+                       job.tolerance_mm, fp.fit.seconds_init, fp.fit.seconds_opt));
+  if (r.status == FitStatus::SolverFailed)
+    progress(fmt::format("patch {}: the least-squares solver failed ({}); the last good motion is kept", name, r.message));
+}
+
+// `patches: auto`: detect_patches over the whole surface with the job's fit options; the detected
+// patches become init: lines jobs (all of them before any pointer is taken) and keep their fits.
+void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit, FittedJob& out, const Progress& progress) {
+  CoverOptions co;
+  co.coverage = job.cover->coverage;
+  co.max_patches = job.cover->max_patches;
+  co.patch.fit = fit;
+  co.patch.tolerance = out.frame.length_to_unit(job.tolerance_mm);
+  Detection d = detect_patches(index, co, [&](const CoverProgress& c) {
+    progress(fmt::format("detect: {}: seed {} of {}, {} patches, coverage {:.1f}%", c.stage, c.seed, c.seeds, c.patches,
+                         100 * c.coverage));
+  });
+  out.detected.reserve(d.patches.size());
+  for (const DetectedPatch& dp : d.patches) {
+    PatchJob pj;
+    pj.name = dp.spec.name;
+    pj.init = PatchInit::Lines;
+    pj.rail = 0;
+    pj.length_mm = out.frame.length_to_mm(dp.spec.length);
+    for (const AxisLine& l : dp.spec.lines) {
+      const Eigen::Vector3d a = out.frame.to_mm(l.a), b = out.frame.to_mm(l.b);
+      pj.lines_mm.push_back({a.x(), a.y(), a.z(), b.x(), b.y(), b.z()});
+    }
+    out.detected.push_back(std::move(pj));
+  }
+  for (size_t k = 0; k < d.patches.size(); ++k) {
+    FittedPatch fp;
+    fp.job = &out.detected[k];
+    fp.fit = std::move(d.patches[k].fit);
+    report_fit(job, out, fp, progress);
+    out.patches.push_back(std::move(fp));
+  }
+  CoverResult c;
+  c.owner = std::move(d.owner);
+  c.deviation_mm = std::move(d.deviation);
+  for (double& x : c.deviation_mm) x = out.frame.length_to_mm(x);
+  c.coverage = d.coverage;
+  c.overcut_mm = out.frame.length_to_mm(d.overcut);
+  c.stop = to_string(d.stop);
+  c.seeds_tried = d.seeds_tried;
+  out.cover = std::move(c);
+  progress(cover_summary(job, out));
+}
+}  // namespace
+
 FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   FittedJob out;
   const CadMesh surface = load_surface_file(
@@ -136,11 +194,20 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   out.frame = unit_diagonal_frame(mesh);
   out.unit_surface = transformed(mesh, out.frame);
   const SurfaceIndex index(out.unit_surface);
+  const auto fit_options = [&] {
+    FitOptions o = job.fit;
+    o.threads = threads;
+    if (job.robust_mm) o.robust_scale = out.frame.length_to_unit(*job.robust_mm);
+    return o;
+  };
+  if (job.cover) {
+    detect_job(job, index, fit_options(), out, progress);
+    check_job(job, out, progress);
+    return out;
+  }
   for (const PatchJob& p : job.patches) {
     PatchOptions o;
-    o.fit = job.fit;
-    o.fit.threads = threads;
-    if (job.robust_mm) o.fit.robust_scale = out.frame.length_to_unit(*job.robust_mm);
+    o.fit = fit_options();
     o.tolerance = out.frame.length_to_unit(job.tolerance_mm);
     o.on_stage = [&](const std::string& s) { progress(fmt::format("patch {}: {}", p.name, s)); };
     o.fit.on_iteration = [&](int it, double objective) {
@@ -149,13 +216,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     FittedPatch fp;
     fp.job = &p;
     fp.fit = fit_patch(index, unit_spec(p, out.frame), o);
-    const FitResult& r = fp.fit.fit;
-    progress(fmt::format("patch {}: eps {:.2e} -> {:.2e} of the diagonal ({:.4f} mm), coverage {:.1f}% within {} mm, "
-                         "{:.1f} s + {:.1f} s",
-                         p.name, r.eps_ini.max, r.eps_opt.max, out.frame.length_to_mm(r.eps_opt.max),
-                         100 * fp.fit.coverage, job.tolerance_mm, fp.fit.seconds_init, fp.fit.seconds_opt));
-    if (r.status == FitStatus::SolverFailed)
-      progress(fmt::format("patch {}: the least-squares solver failed ({}); the last good motion is kept", p.name, r.message));
+    report_fit(job, out, fp, progress);
     out.patches.push_back(std::move(fp));
   }
   check_job(job, out, progress);
@@ -275,6 +336,104 @@ ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p
                                     f.frame.length_to_mm(p.fit.fit.eps_opt.max), job.tolerance_mm));
   if (!p.collisions.clear()) cl.comments.push_back("WARNING: COLLISIONS ALLOWED, SEE REPORT.JSON");
   return cl;
+}
+
+}  // namespace flankcam::pipeline
+
+namespace flankcam::pipeline {
+
+std::string cover_summary(const Job& job, const FittedJob& f) {
+  if (!f.cover) return {};
+  return fmt::format("whole surface: {} patches, {:.1f}% within {} mm (stopped: {})", f.patches.size(),
+                     100 * f.cover->coverage, job.tolerance_mm, f.cover->stop);
+}
+
+nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
+  const CoverResult& c = *f.cover;
+  int uncut = 0;
+  for (double d : c.deviation_mm) uncut += std::isfinite(d) ? 0 : 1;
+  return {{"note", "patches: auto; the whole design surface against the union of the detected patches' machined "
+                   "surfaces: coverage is the share of its area within the tolerance"},
+          {"coverage", c.coverage},
+          {"target_coverage", job.cover->coverage},
+          {"max_patches", job.cover->max_patches},
+          {"patches", f.patches.size()},
+          {"stop", c.stop},
+          {"tolerance_mm", job.tolerance_mm},
+          {"overcut_mm", round_mm(c.overcut_mm)},
+          {"vertices_not_reached", uncut},
+          {"trajectories_fitted", c.seeds_tried},
+          {"detected_job", detected_job_name}};
+}
+
+namespace {
+// A YAML double-quoted scalar (JSON string syntax is valid YAML).
+std::string quoted(const std::string& s) { return nlohmann::json(s).dump(); }
+std::string num(double x) { return fmt::format("{}", x); }
+std::string file_key(const std::filesystem::path& p, const std::vector<int>& faces, const std::optional<double>& deflection) {
+  std::string s = "{file: " + quoted(std::filesystem::absolute(p).lexically_normal().string());
+  if (!faces.empty()) s += fmt::format(", faces: [{}]", fmt::join(faces, ", "));
+  if (deflection) s += ", deflection: " + num(*deflection);
+  return s + "}";
+}
+}  // namespace
+
+std::string detected_job_yaml(const Job& job, const FittedJob& f) {
+  std::string y = fmt::format(
+      "# The patches flankcam detected for {} (patches: auto, {}), written out as init: lines.\n"
+      "# `flankcam fit` or `flankcam run` of this file fits them again from these lines. Lengths in mm.\n",
+      job.file.filename().string(), cover_summary(job, f));
+  y += "surface: " + file_key(job.surface, job.surface_faces, job.surface_deflection_mm) + "\n";
+  if (job.part_given) y += "part: " + file_key(job.part, {}, job.part_deflection_mm) + "\n";
+  const HolderJob& h = job.holder;
+  if (h.shank_length > 0 || h.length > 0 || h.cylinder_length > 0)
+    y += fmt::format("holder: {{shank_length: {}, shank_diameter: {}, length: {}, diameter: {}, diameter_far: {}, "
+                     "cylinder_length: {}}}\n",
+                     num(h.shank_length), num(h.shank_diameter), num(h.length), num(h.diameter), num(h.diameter_far),
+                     num(h.cylinder_length));
+  y += fmt::format("clearance: {}\nfeed: {}\nspindle: {}\nlead_in: {}\nretract: {}\n", num(job.clearance_mm),
+                   num(job.feed_mm_min), num(job.spindle_rpm), num(job.lead_in_mm), num(job.retract_mm));
+  const FitOptions& o = job.fit;
+  y += fmt::format("tool: {{shape: {}, control_points: {}}}\n", to_string(o.shape), o.meridian_control_points);
+  y += fmt::format("tolerance: {}\nsampling: {{s: {}, t: {}}}\n", num(job.tolerance_mm), o.samples_s, o.samples_t);
+  y += fmt::format("weights: {{plane: {}, fair: {}, point: {}, rigid: {}, anchor: {}}}\n", num(o.w_plane), num(o.w_fair),
+                   num(o.w_point), num(o.w_rigid), num(o.w_anchor));
+  y += fmt::format("fit: {{iterations: {}, rail_control_points: {}{}}}\n", o.max_iterations, o.rail_control_points,
+                   job.robust_mm ? ", robust: " + num(*job.robust_mm) : "");
+  if (!job.machine.empty()) {
+    const std::filesystem::path local = job.file.parent_path() / job.machine;
+    y += "machine: " +
+         quoted(std::filesystem::is_regular_file(local) ? std::filesystem::absolute(local).lexically_normal().string()
+                                                        : job.machine) +
+         "\n";
+  }
+  const PostJob& p = job.post;
+  y += "post:\n";
+  if (!p.dialects.empty()) y += fmt::format("  dialects: [{}]\n", fmt::join(p.dialects, ", "));
+  y += fmt::format("  apt: {}\n  cl: {}\n  tool: {}\n  line_numbers: {}\n", p.apt, p.cl, p.tool, p.line_numbers);
+  y += fmt::format("  tolerance: {}\n  angle_tolerance: {}\n", num(p.tolerance_mm), num(p.angle_tolerance_deg));
+  if (p.tool_length_mm > 0) y += "  tool_length: " + num(p.tool_length_mm) + "\n";
+  y += "  safe_height: " + num(p.safe_height_mm) + "\n";
+  y += fmt::format("  setup: {{rotate: [{}, {}, {}], translate: [{}, {}, {}]}}\n", num(p.setup_rotate_deg[0]),
+                   num(p.setup_rotate_deg[1]), num(p.setup_rotate_deg[2]), num(p.setup_translate_mm[0]),
+                   num(p.setup_translate_mm[1]), num(p.setup_translate_mm[2]));
+  if (f.patches.empty()) {
+    y += "# no patch was detected\npatches: []\n";
+    return y;
+  }
+  y += "patches:\n";
+  for (const FittedPatch& fp : f.patches) {
+    const PatchJob& pj = *fp.job;
+    y += fmt::format("  - name: {}\n    init: lines\n    rail: {}\n", pj.name, pj.rail);
+    if (pj.length_mm > 0) y += "    length: " + fixed(pj.length_mm, 6) + "\n";
+    y += "    lines:\n";
+    for (const auto& l : pj.lines_mm) {
+      std::vector<std::string> v;
+      for (double x : l) v.push_back(fixed(x, 6));
+      y += fmt::format("      - [{}]\n", fmt::join(v, ", "));
+    }
+  }
+  return y;
 }
 
 }  // namespace flankcam::pipeline

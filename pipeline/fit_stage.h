@@ -28,13 +28,36 @@ struct FittedPatch {
   CollisionReport collisions;    // against the whole part
 };
 
+// `patches: auto`: the whole surface as the union of the detected patches (core/detect.h).
+struct CoverResult {
+  std::vector<int> owner;             // per surface vertex: index of the patch machining it, -1: none
+  std::vector<double> deviation_mm;   // per surface vertex: the union's deviation, NaN: uncut
+  double coverage = 0;                // share of the area within the tolerance
+  double overcut_mm = 0;              // worst overcut of the union (>= 0)
+  std::string stop;                   // coverage reached, max patches, no progress
+  int seeds_tried = 0;
+};
+
 struct FittedJob {
   LoadedMesh surface;  // mm
   Similarity frame;    // mm -> unit frame
   TriMesh unit_surface;
   std::vector<FittedPatch> patches;
   std::optional<TriMesh> part;  // the job's separate `part:` (mm) once checked; unset: the surface is the part
+  // `patches: auto`: the detected patches as jobs (init: lines), complete before any FittedPatch::job
+  // points into it; a moved vector keeps its elements, so FittedJob stays movable.
+  std::vector<PatchJob> detected;
+  std::optional<CoverResult> cover;
 };
+
+// "whole surface: N patches, C% within T mm (stopped: REASON)"; empty without `patches: auto`.
+[[nodiscard]] std::string cover_summary(const Job& job, const FittedJob& fitted);
+// The "cover" entry of report.json (`patches: auto` only).
+[[nodiscard]] nlohmann::ordered_json cover_report(const Job& job, const FittedJob& fitted);
+// `patches: auto`: the job with the detected patches written out as `init: lines` (detected-job.yaml).
+[[nodiscard]] std::string detected_job_yaml(const Job& job, const FittedJob& fitted);
+// The name of that file in the output folder.
+inline const std::string detected_job_name = "detected-job.yaml";
 
 // Loads the design surface, fits every patch in the unit-diagonal frame (paper Sec. 4) and runs
 // check_job. The OpenMP loops use however many threads the caller set (see run.h).

@@ -138,7 +138,8 @@ FileKey read_file_key(const Reader& r, const YAML::Node& n, const std::string& k
   if (n.IsMap()) {
     r.only_keys(n, key, with_faces ? std::set<std::string>{"file", "faces", "deflection"} : std::set<std::string>{"file", "deflection"});
     if (!n["file"]) r.fail(n, key + ".file", "missing");
-    file = n["file"], file_key = key + ".file";
+    file.reset(n["file"]);  // not `file = ...`: yaml-cpp would overwrite n itself with the scalar
+    file_key = key + ".file";
     if (const YAML::Node f = n["faces"]) {
       if (!f.IsSequence() || f.size() == 0) r.fail(f, key + ".faces", "expected a list of face numbers from `flankcam faces`, e.g. [132]");
       for (const YAML::Node& x : f) out.faces.push_back(r.integer(x, key + ".faces", 1, 10000000));
@@ -162,7 +163,7 @@ Job read_job(const std::filesystem::path& file) {
   const Reader r(name);
   const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
-  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "machine", "post"});
+  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post"});
 
   Job job;
   job.file = file;
@@ -246,8 +247,23 @@ Job read_job(const std::filesystem::path& file) {
   if (const YAML::Node p = root["post"]) read_post(r, p, job.post);
 
   const YAML::Node ps = root["patches"];
-  if (!ps) throw InputError(name + ": patches: missing (at least one patch with its initialisation)");
-  if (!ps.IsSequence() || ps.size() == 0) r.fail(ps, "patches", "expected a list of at least one patch");
+  if (!ps) throw InputError(name + ": patches: missing (a list of patches with their initialisation, or auto)");
+  if (ps.IsScalar() && ps.Scalar() == "auto") {
+    CoverJob& c = job.cover.emplace();
+    if (const YAML::Node cv = root["cover"]) {
+      if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8}");
+      r.only_keys(cv, "cover", {"coverage", "max_patches"});
+      if (cv["coverage"]) {
+        c.coverage = r.number(cv["coverage"], "cover.coverage");
+        if (!(c.coverage > 0 && c.coverage <= 1))
+          r.fail(cv["coverage"], "cover.coverage", fmt::format("must be in (0, 1], got {}", cv["coverage"].Scalar()));
+      }
+      if (cv["max_patches"]) c.max_patches = r.integer(cv["max_patches"], "cover.max_patches", 1, 32);
+    }
+    return job;
+  }
+  if (root["cover"]) r.fail(root["cover"], "cover", "only with patches: auto");
+  if (!ps.IsSequence() || ps.size() == 0) r.fail(ps, "patches", "expected a list of at least one patch, or auto");
   std::set<std::string> names;
   for (size_t k = 0; k < ps.size(); ++k) job.patches.push_back(read_patch(r, ps[k], fmt::format("patches[{}]", k), names));
   return job;

@@ -41,6 +41,12 @@ struct PostJob {
   std::array<double, 3> setup_rotate_deg{0, 0, 0}, setup_translate_mm{0, 0, 0};
 };
 
+// `patches: auto`: the patches are detected (core/detect.h), optional `cover: {coverage, max_patches}`.
+struct CoverJob {
+  double coverage = 0.95;  // share of the surface's area to bring within the tolerance, (0, 1]
+  int max_patches = 8;     // 1 .. 32
+};
+
 struct Job {
   std::filesystem::path file;     // the job file itself
   std::filesystem::path surface;  // resolved against the job file's folder
@@ -56,7 +62,8 @@ struct Job {
   double tolerance_mm = 0.01;
   std::optional<double> robust_mm;  // Cauchy scale of the fit; unset: FitOptions' relative default
   FitOptions fit;                   // sampling, weights, shape, iterations (unit-free parts)
-  std::vector<PatchJob> patches;
+  std::vector<PatchJob> patches;   // empty with `patches: auto`
+  std::optional<CoverJob> cover;   // set: `patches: auto`
   std::string machine;  // `run`: a machine file (relative to the job file) or a name in machines/
   PostJob post;
 };

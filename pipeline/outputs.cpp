@@ -142,6 +142,10 @@ std::vector<std::vector<std::string>> write_fit(const FitRun& run, OutputDir& ou
                        {"sampling", {{"s", job.fit.samples_s}, {"t", job.fit.samples_t}}},
                        {"weights", {{"plane", job.fit.w_plane}, {"fair", job.fit.w_fair}, {"point", job.fit.w_point},
                                     {"rigid", job.fit.w_rigid}, {"anchor", job.fit.w_anchor}}}};
+  if (fitted.cover) {
+    report["cover"] = cover_report(job, fitted);
+    write_text(out, detected_job_name, detected_job_yaml(job, fitted));
+  }
   auto& patches = report["patches"] = nlohmann::ordered_json::array();
   std::vector<std::vector<std::string>> all_files;
   for (size_t k = 0; k < fitted.patches.size(); ++k) {
@@ -172,6 +176,10 @@ std::vector<std::vector<std::string>> write_run(const RunResult& run, OutputDir&
   report["machine"] = {{"name", machine.name}, {"kind", machine.kind()}, {"file", machine.file},
                        {"dialect", machine.controller.dialect}, {"tcp", machine.controller.tcp}};
   report["surface"] = surface_report(job, fitted);
+  if (fitted.cover) {
+    report["cover"] = cover_report(job, fitted);
+    write_text(out, detected_job_name, detected_job_yaml(job, fitted));
+  }
   auto& patches = report["patches"] = nlohmann::ordered_json::array();
 
   HtmlReport html;
@@ -183,6 +191,10 @@ std::vector<std::vector<std::string>> write_run(const RunResult& run, OutputDir&
                 fmt::format("Colours: green within the tolerance {} mm, red material left (undercut), blue overcut, "
                             "grey not reached by the patch.",
                             job.tolerance_mm)};
+  if (fitted.cover)
+    html.intro.push_back(fmt::format("Patches detected automatically (patches: auto; written out as init: lines in {}). "
+                                     "W{}.",
+                                     detected_job_name, cover_summary(job, fitted).substr(1)));
   html.columns = {"patch", "tool", "eps (rel.)", "eps mm", "coverage", "collisions", "programs"};
 
   std::vector<std::vector<std::string>> all_files;

@@ -70,6 +70,7 @@ FitRun fit_run(Job job, const RunOptions& o, ToolOf tool_of) {
 void check_fit_outputs(const Job& job) {
   OutputPlan plan;
   plan.add("report.json", "the report");
+  if (job.cover) plan.add(detected_job_name, "the detected patches (patches: auto)");
   for (const PatchJob& p : job.patches) plan_fit_files(p.name, true, true, true, plan);
 }
 
@@ -81,6 +82,7 @@ Machine check_run(const Job& job) {
   OutputPlan plan;
   plan.add("report.json", "the report");
   plan.add("report.html", "the report");
+  if (job.cover) plan.add(detected_job_name, "the detected patches (patches: auto)");
   const std::vector<Dialect> dialects = dialects_of(machine, settings);
   for (const PatchJob& p : job.patches) {
     plan_fit_files(p.name, job.post.tool, job.post.apt, job.post.cl, plan);

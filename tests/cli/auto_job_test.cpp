@@ -1,0 +1,105 @@
+// `patches: auto` through the real binary: detection on an exact envelope, the whole-surface cover
+// in report.json, detected-job.yaml fitting the same patch again, and the job errors of cover:.
+#include <doctest/doctest.h>
+
+#include <cmath>
+#include <nlohmann/json.hpp>
+
+#include "tests/test_util.h"
+
+using namespace flankcam;
+
+namespace {
+// An exact envelope of a cone along an arc (paper Fig. 15) and a `patches: auto` job on it.
+std::string auto_job(const test::ScratchDir& dir, const std::string& extra) {
+  REQUIRE(test::run_flankcam("envelope --profile cone --motion arc --grid-s 40 --grid-t 120 --out " + dir.file("env"), dir)
+              .code == 0);
+  test::write_text(dir.file("job.yaml"),
+                   "surface: env/envelope.obj\ntool: {shape: cone}\ntolerance: 0.05\nfeed: 800\n" + extra + "patches: auto\n");
+  return dir.file("job.yaml");
+}
+}  // namespace
+
+TEST_CASE("flankcam fit with patches: auto covers an exact envelope with one patch and writes a job that fits it again") {
+  test::ScratchDir dir("auto-fit");
+  const std::string job = auto_job(dir, "cover: {coverage: 0.95, max_patches: 3}\n");
+  const auto r = test::run_flankcam("fit " + job + " --out " + dir.file("out"), dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  CHECK(r.err.find("detect: ") != std::string::npos);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const auto& cover = report["cover"];
+  CHECK(cover["patches"] == 1);
+  CHECK(double(cover["coverage"]) >= 0.95);
+  CHECK(cover["stop"] == "coverage reached");
+  CHECK(double(cover["overcut_mm"]) <= 0.05);
+  REQUIRE(report["patches"].size() == 1);
+  const auto& patch = report["patches"][0];
+  CHECK(patch["name"] == "auto-1");
+  CHECK(patch["init"] == "lines");
+  CHECK(double(patch["eps_opt_mm"]) < 0.05);
+  // One patch: the union is that patch, so the two coverages agree.
+  CHECK(double(patch["coverage"]) == doctest::Approx(double(cover["coverage"])).epsilon(0.01));
+
+  // detected-job.yaml is a job with the patch as init: lines; it fits the same patch again.
+  const std::string detected = test::read_text(dir.file("out/detected-job.yaml"));
+  CHECK(detected.find("init: lines") != std::string::npos);
+  CHECK(detected.find("feed: 800") != std::string::npos);
+  const auto again = test::run_flankcam("fit " + dir.file("out/detected-job.yaml") + " --out " + dir.file("again"), dir);
+  INFO(again.err);
+  REQUIRE(again.code == 0);
+  const auto report2 = nlohmann::json::parse(test::read_text(dir.file("again/report.json")));
+  CHECK_FALSE(report2.contains("cover"));
+  REQUIRE(report2["patches"].size() == 1);
+  const auto& patch2 = report2["patches"][0];
+  CHECK(patch2["name"] == "auto-1");
+  CHECK(std::abs(double(patch2["coverage"]) - double(cover["coverage"])) <= 0.01);
+  CHECK(double(patch2["eps_opt_mm"]) < 0.05);
+  // The same tool within a few microns.
+  CHECK(double(patch2["tool"]["diameter_max"]) == doctest::Approx(double(patch["tool"]["diameter_max"])).epsilon(0.01));
+}
+
+TEST_CASE("patches: auto job errors name the file, line and key and write nothing") {
+  test::ScratchDir dir("auto-errors");
+  test::write_text(dir.file("s.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const struct {
+    const char* yaml;
+    const char* message;
+  } cases[] = {
+      {"surface: s.obj\ncover: {coverage: 0.9}\npatches:\n  - {name: p, init: line, line: [0, 0, 0, 0, 0, 1]}\n",
+       "job.yaml:2: cover: only with patches: auto"},
+      {"surface: s.obj\ncover: {coverage: 1.5}\npatches: auto\n", "job.yaml:2: cover.coverage: must be in (0, 1], got 1.5"},
+      {"surface: s.obj\ncover: {coverage: 0}\npatches: auto\n", "job.yaml:2: cover.coverage: must be in (0, 1], got 0"},
+      {"surface: s.obj\ncover: {max_patches: 33}\npatches: auto\n", "job.yaml:2: cover.max_patches:"},
+      {"surface: s.obj\ncover: {patches: 3}\npatches: auto\n", "job.yaml:2: cover.patches: unknown key"},
+      {"surface: s.obj\npatches: automatic\n", "job.yaml:2: patches: expected a list of at least one patch, or auto"},
+  };
+  for (const auto& c : cases) {
+    CAPTURE(c.yaml);
+    test::write_text(dir.file("job.yaml"), c.yaml);
+    const auto r = test::run_flankcam("fit " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
+    CHECK(r.code == 2);
+    CHECK(r.err.find(c.message) != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir.file("out")));
+  }
+}
+
+TEST_CASE("flankcam run of examples/auto posts the detected patch and reports the whole surface") {
+  test::ScratchDir dir("auto-run");
+  const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/auto/job.yaml";
+  const auto r = test::run_flankcam("run " + job + " --out " + dir.file("out") + " --threads 2", dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  CHECK(report["cover"]["patches"] == report["patches"].size());
+  CHECK(double(report["cover"]["coverage"]) >= 0.95);
+  REQUIRE(report["patches"].size() >= 1);
+  CHECK(report["patches"][0]["collisions"].empty());
+  CHECK(std::filesystem::exists(dir.file("out/auto-1.mpf")));
+  CHECK(test::read_text(dir.file("out/report.html")).find("Whole surface: ") != std::string::npos);
+  // The same detection at one thread: detected-job.yaml byte for byte.
+  const auto r1 = test::run_flankcam("run " + job + " --out " + dir.file("one") + " --threads 1", dir);
+  REQUIRE(r1.code == 0);
+  CHECK(test::read_text(dir.file("one/detected-job.yaml")) == test::read_text(dir.file("out/detected-job.yaml")));
+  CHECK(test::read_text(dir.file("one/auto-1.mpf")) == test::read_text(dir.file("out/auto-1.mpf")));
+}
