@@ -64,16 +64,8 @@ std::vector<Eigen::Vector2d> read_meridian(const std::string& path) {
   return out;
 }
 
-Eigen::Matrix3d setup_rotation(const PostJob& post) {
-  constexpr double deg = M_PI / 180;
-  return (Eigen::AngleAxisd(post.setup_rotate_deg[2] * deg, Eigen::Vector3d::UnitZ()) *
-          Eigen::AngleAxisd(post.setup_rotate_deg[1] * deg, Eigen::Vector3d::UnitY()) *
-          Eigen::AngleAxisd(post.setup_rotate_deg[0] * deg, Eigen::Vector3d::UnitX()))
-      .toRotationMatrix();
-}
-
 TriMesh to_work(const PostJob& post, TriMesh mesh) {
-  const Eigen::Matrix3d R = setup_rotation(post);
+  const Eigen::Matrix3d R = pipeline::setup_rotation(post);
   const Eigen::Vector3d t(post.setup_translate_mm[0], post.setup_translate_mm[1], post.setup_translate_mm[2]);
   for (Eigen::Vector3d& v : mesh.vertices) v = R * v + t;
   return mesh;

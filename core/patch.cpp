@@ -1,5 +1,7 @@
 #include "core/patch.h"
 
+#include <algorithm>
+
 #include <chrono>
 #include <cmath>
 
@@ -111,6 +113,13 @@ Rails trimmed(const Rails& r, double t0, double t1) {
     B.row(i) = r.b.point(t).transpose();
   }
   return {fit_bspline(A, ts, r.a.size()), fit_bspline(B, ts, r.b.size()), r.length};
+}
+
+PatchFit reversed(PatchFit f) {
+  std::swap(f.initial.a, f.initial.b);
+  std::swap(f.fit.rails.a, f.fit.rails.b);
+  std::reverse(f.fit.tool.D.begin(), f.fit.tool.D.end());
+  return f;
 }
 
 }  // namespace flankcam

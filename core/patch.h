@@ -62,6 +62,11 @@ struct PatchFit {
 // The rails restricted to [t0, t1], reparametrised to [0, 1] (same control point count).
 [[nodiscard]] Rails trimmed(const Rails& rails, double t0, double t1);
 
+// The same swept tool with its ends exchanged: rails a <-> b and d(s) -> d(1 - s) (the clamped
+// uniform knots are symmetric, so reversing the radius coefficients reverses d for every shape).
+// The envelope, its errors and coverage are unchanged; only which end is the tip changes.
+[[nodiscard]] PatchFit reversed(PatchFit fit);
+
 // The longest run of Ω's rows (t) without a point below Φ by more than `tolerance` (an Ω vertex, or
 // a Φ vertex whose closest Ω point lies in the row), as [t0, t1] of the machined motion; {0, 0} when
 // no two consecutive rows are clean.

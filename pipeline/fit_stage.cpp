@@ -148,6 +148,17 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
     progress(fmt::format("detect: {}: seed {} of {}, {} patches, coverage {:.1f}%", c.stage, c.seed, c.seeds, c.patches,
                          100 * c.coverage));
   });
+  // Detection does not know the machine: turn every patch so that its tool stands with the tip
+  // down and the holder up in the work frame (the setup applied), as a spindle holds it.
+  const Eigen::Vector3d up_part = setup_rotation(job.post).transpose() * Eigen::Vector3d::UnitZ();
+  for (DetectedPatch& dp : d.patches) {
+    const Rails& r = dp.fit.fit.rails;
+    Eigen::Vector3d mean_axis = Eigen::Vector3d::Zero();
+    for (int i = 0; i <= 20; ++i) mean_axis += (r.b.point(i / 20.0) - r.a.point(i / 20.0)).normalized();
+    if (mean_axis.dot(up_part) >= 0) continue;
+    dp.fit = reversed(std::move(dp.fit));
+    for (AxisLine& l : dp.spec.lines) std::swap(l.a, l.b);
+  }
   out.detected.reserve(d.patches.size());
   for (const DetectedPatch& dp : d.patches) {
     PatchJob pj;

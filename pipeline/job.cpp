@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include <Eigen/Geometry>
 #include <cmath>
 #include <regex>
 #include <set>
@@ -156,6 +157,14 @@ FileKey read_file_key(const Reader& r, const YAML::Node& n, const std::string& k
 }
 
 }  // namespace
+
+Eigen::Matrix3d setup_rotation(const PostJob& post) {
+  constexpr double deg = M_PI / 180;
+  return (Eigen::AngleAxisd(post.setup_rotate_deg[2] * deg, Eigen::Vector3d::UnitZ()) *
+          Eigen::AngleAxisd(post.setup_rotate_deg[1] * deg, Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(post.setup_rotate_deg[0] * deg, Eigen::Vector3d::UnitX()))
+      .toRotationMatrix();
+}
 
 Job read_job(const std::filesystem::path& file) {
   const std::string name = file.string();

@@ -2,6 +2,7 @@
 // with their initialisation lines, all in part coordinates and millimetres. Every error names the
 // file, the line and the key.
 #pragma once
+#include <Eigen/Core>
 #include <array>
 #include <filesystem>
 #include <optional>
@@ -46,6 +47,9 @@ struct CoverJob {
   double coverage = 0.95;  // share of the surface's area to bring within the tolerance, (0, 1]
   int max_patches = 8;     // 1 .. 32
 };
+
+// The setup's rotation R (work = R part + t).
+[[nodiscard]] Eigen::Matrix3d setup_rotation(const PostJob& post);
 
 struct Job {
   std::filesystem::path file;     // the job file itself

@@ -100,11 +100,7 @@ FitRun fit(Job job, const RunOptions& options) {
 }
 
 ToolPose to_work(const PostJob& post, const ToolPose& p) {
-  constexpr double deg = M_PI / 180;
-  const Eigen::Matrix3d R = (Eigen::AngleAxisd(post.setup_rotate_deg[2] * deg, Eigen::Vector3d::UnitZ()) *
-                             Eigen::AngleAxisd(post.setup_rotate_deg[1] * deg, Eigen::Vector3d::UnitY()) *
-                             Eigen::AngleAxisd(post.setup_rotate_deg[0] * deg, Eigen::Vector3d::UnitX()))
-                                .toRotationMatrix();
+  const Eigen::Matrix3d R = setup_rotation(post);
   const Eigen::Vector3d t(post.setup_translate_mm[0], post.setup_translate_mm[1], post.setup_translate_mm[2]);
   return {R * p.tip + t, (R * p.axis).normalized()};
 }

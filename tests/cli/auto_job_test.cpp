@@ -103,3 +103,26 @@ TEST_CASE("flankcam run of examples/auto posts the detected patch and reports th
   CHECK(test::read_text(dir.file("one/detected-job.yaml")) == test::read_text(dir.file("out/detected-job.yaml")));
   CHECK(test::read_text(dir.file("one/auto-1.mpf")) == test::read_text(dir.file("out/auto-1.mpf")));
 }
+
+TEST_CASE("patches: auto on the bundled blade stands every tool tip-down in the work frame and posts it on a head machine") {
+  // Detection knows no machine: a patch found with its tip at the top would need the head upside
+  // down ("rotary axis B would need -172 deg"). The pipeline turns such a patch end for end.
+  test::ScratchDir dir("auto-blade");
+  const std::string blade = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj";
+  test::write_text(dir.file("job.yaml"), "surface: " + blade +
+                                             "\ntool: {shape: general}\ntolerance: 0.015\n"
+                                             "holder: {shank_length: 20, shank_diameter: 8, length: 40, diameter: 25, "
+                                             "diameter_far: 40}\nmachine: xyzbc-head-table\npost: {dialects: [iso]}\n"
+                                             "patches: auto\n");
+  const auto r = test::run_flankcam("run " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  CHECK(double(report["cover"]["coverage"]) >= 0.95);
+  REQUIRE(report["patches"].size() >= 1);
+  for (const auto& patch : report["patches"]) {
+    CAPTURE(std::string(patch["name"]));
+    CHECK(patch["programs"].size() == 1);
+    for (const auto& row : patch["axis"]) CHECK(double(row[5]) > double(row[2]));  // b above a: holder up
+  }
+}

@@ -246,7 +246,7 @@ TEST_CASE("the machined design surface: the wall is reached and within tolerance
   MESSAGE("design coverage " << rep.design.coverage() << " of " << rep.design.reached << " reached vertices");
 }
 
-TEST_CASE("post without a part says that links were not checked; refusals name the key") {
+TEST_CASE("post without a part says that links were not checked, and refusals name the key") {
   const Case c = cases()[1];
   PostOptions o;
   o.dialect = c.dialect;
