@@ -183,7 +183,8 @@ void write_verify(const VerifyRun& run, OutputDir& out) {
                   "coverage"};
   for (const VerifiedProgram& r : run.programs) {
     const VerifyReport& v = r.report;
-    const std::array<double, 3>&rapid_min = r.min_rapid_mm, &feed_min = r.min_feed_mm;
+    const std::array<double, 3>& rapid_min = r.min_rapid_mm;
+    const std::array<double, 3>& feed_min = r.min_feed_mm;
     nlohmann::ordered_json blocks = nlohmann::ordered_json::array();
     for (const VerifiedBlock& b : v.blocks)
       blocks.push_back({b.line, b.rapid ? "rapid" : "feed", r4(b.min_clearance_mm[0]), r4(b.min_clearance_mm[1]),
