@@ -1,266 +1,38 @@
 // `flankcam verify --job JOB.yaml PROGRAM [PROGRAM ...] --out DIR`: back-simulates NC programs (any
-// of the four dialects, by extension) or APT CL-data through the job's machine against its part,
-// and writes verify.json and verify.html. Exit 0 clean, 4 collision or gouge, 2 bad input.
+// of the four dialects, by extension) or APT CL-data through the job's machine against its part
+// (pipeline::verify), and writes verify.json and verify.html. Exit 0 clean, 4 collision or gouge,
+// 2 bad input. This file only parses arguments and prints.
 #include <fmt/format.h>
 
-#include <Eigen/Geometry>
-#include <filesystem>
-#include <fstream>
-#include <map>
-#include <nlohmann/json.hpp>
-#include <regex>
-#include <sstream>
-
 #include "cli/commands.h"
-#include "pipeline/job.h"
-#include "pipeline/post_stage.h"
-#include "core/atomic_file.h"
-#include "core/errors.h"
-#include "core/mesh.h"
-#include "core/number_format.h"
-#include "postproc/report_html.h"
-#include "postproc/report_svg.h"
-#include "postproc/verify.h"
+#include "pipeline/output_dir.h"
+#include "pipeline/verify.h"
 
 namespace flankcam::cli {
 
 namespace {
-namespace fs = std::filesystem;
-using pipeline::Job;
-using pipeline::read_job;
-using pipeline::find_machine;
-using pipeline::PostJob;
-
 struct VerifyArgs {
-  std::string job, out;
-  std::vector<std::string> programs, tools;
+  pipeline::VerifyRequest request;
+  std::string out;
   bool quiet = false;
 };
 
-std::string read_text(const std::string& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(path + ": cannot read");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
-}
-
-// NAME-tool.csv: "# comment", "z_mm,r_mm", then z,r rows (mm).
-std::vector<Eigen::Vector2d> read_meridian(const std::string& path) {
-  std::istringstream in(read_text(path));
-  std::vector<Eigen::Vector2d> out;
-  std::string line;
-  int n = 0;
-  while (std::getline(in, line)) {
-    ++n;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (line.empty() || line[0] == '#' || line.rfind("z_mm", 0) == 0) continue;
-    const size_t comma = line.find(',');
-    const auto z = parse_number(line.substr(0, comma)), r = comma == std::string::npos ? std::nullopt : parse_number(line.substr(comma + 1));
-    if (!z || !r) throw InputError(fmt::format("{}:{}: expected 'z_mm,r_mm'", path, n));
-    out.emplace_back(*z, *r);
-  }
-  if (out.size() < 2) throw InputError(path + ": a tool meridian needs at least two rows z_mm,r_mm");
-  return out;
-}
-
-TriMesh to_work(const PostJob& post, TriMesh mesh) {
-  const Eigen::Matrix3d R = pipeline::setup_rotation(post);
-  const Eigen::Vector3d t(post.setup_translate_mm[0], post.setup_translate_mm[1], post.setup_translate_mm[2]);
-  for (Eigen::Vector3d& v : mesh.vertices) v = R * v + t;
-  return mesh;
-}
-
-// The tool names a program's tool-change comments give: "T2 cone-2 D.. L.." -> {2: "cone-2"}.
-std::map<int, std::string> tool_names(const std::string& text) {
-  std::map<int, std::string> out;
-  static const std::regex re(R"([(;]\s*T(\d+) (\S+) D[0-9.]+ L[0-9.]+)");
-  for (auto it = std::sregex_iterator(text.begin(), text.end(), re); it != std::sregex_iterator(); ++it)
-    out.emplace(std::stoi((*it)[1].str()), (*it)[2].str());
-  return out;
-}
-
-nlohmann::ordered_json round3(const Eigen::Vector3d& p) {
-  return {std::round(p.x() * 1e4) / 1e4, std::round(p.y() * 1e4) / 1e4, std::round(p.z() * 1e4) / 1e4};
-}
-double r4(double x) { return std::isfinite(x) ? std::round(x * 1e4) / 1e4 : x; }
-
 int run_verify(const VerifyArgs& args) {
-  const Job job = read_job(args.job);
-  if (job.machine.empty()) throw InputError(job.file.string() + ": machine: missing (verify needs the machine)");
-  const Machine m = find_machine(job.machine, job.file.parent_path());
-  ToolAssembly holder;
-  holder.shank_length = job.holder.shank_length, holder.shank_diameter = job.holder.shank_diameter;
-  holder.holder_length = job.holder.length, holder.holder_diameter = job.holder.diameter;
-  holder.holder_diameter_far = job.holder.diameter_far, holder.holder_cylinder_length = job.holder.cylinder_length;
-  std::map<int, std::vector<Eigen::Vector2d>> given;  // --tool T=FILE
-  for (const std::string& t : args.tools) {
-    const size_t eq = t.find('=');
-    const auto n = eq == std::string::npos ? std::nullopt : parse_number(t.substr(0, eq));
-    if (!n || *n < 0 || *n != std::floor(*n)) throw InputError("--tool " + t + ": expected T=FILE, e.g. 2=cone-2-tool.csv");
-    given[int(*n)] = read_meridian(t.substr(eq + 1));
-  }
-  // Everything is read before anything is written.
-  const LoadedMesh surface = load_mesh(job.surface.string());
-  const SurfaceIndex design(to_work(job.post, surface.mesh));
-  std::optional<SurfaceIndex> separate;
-  if (job.part != job.surface) separate.emplace(to_work(job.post, load_mesh(job.part.string()).mesh));
-  const SurfaceIndex& part = separate ? *separate : design;
-  VerifyOptions vo;
-  vo.gouge_tolerance_mm = job.tolerance_mm;
-
-  struct Result {
-    std::string file;
-    VerifyReport rep;
-    std::vector<Eigen::Vector2d> meridian;
-  };
-  std::vector<Result> results;
-  for (const std::string& file : args.programs) {
-    const fs::path path(file);
-    const std::string text = read_text(file);
-    const auto tool_for = [&](int number, const std::string& name) {
-      VerifyTool vt;
-      vt.number = number;
-      std::vector<Eigen::Vector2d> meridian;
-      if (given.count(number)) meridian = given[number];
-      else if (given.count(0)) meridian = given[0];
-      else {
-        const fs::path csv = path.parent_path() / (name + "-tool.csv");
-        if (!fs::is_regular_file(csv))
-          throw InputError(fmt::format("{}: tool T{}: no {} beside the program (give --tool {}=FILE)", file, number,
-                                       csv.filename().string(), number));
-        meridian = read_meridian(csv.string());
-      }
-      vt.assembly = assembly_from_meridian(meridian, holder);
-      vt.length_mm = job.post.tool_length_mm > 0 ? job.post.tool_length_mm
-                                                 : job.holder.length + job.holder.cylinder_length +
-                                                       job.holder.shank_length + vt.assembly.cutter_length();
-      return vt;
-    };
-    Result r;
-    r.file = file;
-    if (is_cl_data_file(file)) {
-      const ClProgram cl = parse_apt(text, file);
-      VerifyTool vt;
-      if (given.empty() && cl.profile.size() >= 2) {
-        vt.assembly = assembly_from_meridian(cl.profile, holder);
-      } else {
-        vt = tool_for(cl.tool, path.stem().string());
-      }
-      r.meridian = vt.assembly.cutter;
-      r.rep = verify_cl(cl, part, vt, vo, &design);
-    } else {
-      std::vector<VerifyTool> tools;
-      const std::map<int, std::string> names = tool_names(text);
-      if (names.empty()) tools.push_back(tool_for(0, path.stem().string()));
-      for (const auto& [number, name] : names) tools.push_back(tool_for(number, name));
-      r.meridian = tools.front().assembly.cutter;
-      r.rep = verify_text(text, dialect_of_file(file), file, m, part, tools, vo, &design);
-    }
-    results.push_back(std::move(r));
-  }
-
-  const fs::path out = args.out;
-  fs::create_directories(out);
-  nlohmann::ordered_json report;
-  report["generator"] = "flankcam verify";
-  report["job"] = job.file.string();
-  report["machine"] = m.name;
-  report["units"] = "mm";
-  report["gouge_tolerance_mm"] = vo.gouge_tolerance_mm;
-  auto& programs = report["programs"] = nlohmann::ordered_json::array();
-  HtmlReport html;
-  html.title = "flankcam verify: " + job.file.filename().string();
-  html.intro = {fmt::format("Back-simulation of each program from its text through {} ({}) against {} with the cutter "
-                            "from its meridian, shank and holder from the job. Feed blocks may cut {} mm into the part "
-                            "(the job's tolerance); rapids must not touch it.",
-                            m.name, m.kind(), job.part.filename().string(), vo.gouge_tolerance_mm)};
-  html.columns = {"program", "verdict", "blocks", "min rapid clearance", "collisions / gouges", "axis violations", "cycle min",
-                  "coverage"};
-  int bad = 0;
-  for (const Result& r : results) {
-    const VerifyReport& v = r.rep;
-    bad += !v.clean();
-    std::array<double, 3> rapid_min{INFINITY, INFINITY, INFINITY}, feed_min{INFINITY, INFINITY, INFINITY};
-    nlohmann::ordered_json blocks = nlohmann::ordered_json::array();
-    for (const VerifiedBlock& b : v.blocks) {
-      auto& mins = b.rapid ? rapid_min : feed_min;
-      for (size_t k = 0; k < 3; ++k) mins[k] = std::min(mins[k], b.min_clearance_mm[k]);
-      blocks.push_back({b.line, b.rapid ? "rapid" : "feed", r4(b.min_clearance_mm[0]), r4(b.min_clearance_mm[1]),
-                        r4(b.min_clearance_mm[2])});
-    }
-    nlohmann::ordered_json hits = nlohmann::ordered_json::array();
-    for (const VerifyHit& h : v.hits)
-      hits.push_back({{"line", h.line}, {"block", h.block}, {"motion", h.rapid ? "rapid" : "feed"}, {"kind", h.kind()},
-                      {"component", to_string(h.component)}, {"depth_mm", r4(h.depth_mm)}, {"point", round3(h.point)}});
-    nlohmann::ordered_json viol = nlohmann::ordered_json::array();
-    for (const AxisViolation& a : v.violations)
-      viol.push_back({{"line", a.line}, {"axis", a.axis}, {"what", a.speed ? "speed" : "travel"}, {"value", r4(a.value)},
-                      {"limit", r4(a.limit)}});
-    const auto mins_json = [](const std::array<double, 3>& a) {
-      return nlohmann::ordered_json{{"cutter", r4(a[0])}, {"shank", r4(a[1])}, {"holder", r4(a[2])}};
-    };
-    nlohmann::ordered_json e;
-    e["file"] = r.file;
-    e["clean"] = v.clean();
-    if (!v.clean()) e["problem"] = v.first_problem(r.file);
-    e["motion_blocks"] = v.blocks.size();
-    e["positions_simulated"] = v.positions;
-    e["min_clearance_rapid_mm"] = mins_json(rapid_min);
-    e["min_clearance_feed_mm"] = mins_json(feed_min);
-    e["collisions_and_gouges"] = hits;
-    e["axis_violations"] = viol;
-    e["cycle_minutes"] = r4(v.cycle_minutes);
-    e["cut_minutes"] = r4(v.cut_minutes);
-    e["design_surface"] = {{"vertices_reached", v.design.reached}, {"within_tolerance", v.design.within},
-                           {"coverage", r4(v.design.coverage())}};
-    e["blocks"] = {{"columns", {"line", "motion", "cutter_mm", "shank_mm", "holder_mm"}}, {"rows", blocks}};
-    programs.push_back(e);
-
-    const std::string verdict = v.clean() ? "clean" : fmt::format("{} hit(s)", v.hits.size());
-    const double rapid_all = std::min({rapid_min[0], rapid_min[1], rapid_min[2]});
-    html.rows.push_back({fs::path(r.file).filename().string(), verdict, fmt::format("{}", v.blocks.size()),
-                         fmt::format("{:.3f} mm", rapid_all), fmt::format("{}", v.hits.size()),
-                         fmt::format("{}", v.violations.size()), fmt::format("{:.2f}", v.cycle_minutes),
-                         fmt::format("{:.1f}%", 100 * v.design.coverage())});
-    HtmlSection sec;
-    sec.heading = fs::path(r.file).filename().string();
-    for (const VerifyHit& h : v.hits)
-      sec.warnings.push_back(fmt::format("line {}: {} {} {:.3f} mm deep at ({:.3f}, {:.3f}, {:.3f}) ({} block)", h.line,
-                                         to_string(h.component), h.kind(), h.depth_mm, h.point.x(), h.point.y(),
-                                         h.point.z(), h.rapid ? "rapid" : "feed"));
-    for (const AxisViolation& a : v.violations)
-      sec.warnings.push_back(fmt::format("line {}: {} {} {:.4f} beyond {:.4f}", a.line, a.axis,
-                                         a.speed ? "speed" : "travel", a.value, a.limit));
-    sec.facts = {{"motion blocks", fmt::format("{}", v.blocks.size())},
-                 {"positions simulated", fmt::format("{}", v.positions)},
-                 {"min clearance in rapids (cutter, shank, holder)",
-                  fmt::format("{:.3f}, {:.3f}, {:.3f} mm", rapid_min[0], rapid_min[1], rapid_min[2])},
-                 {"min clearance in feed blocks (cutter, shank, holder)",
-                  fmt::format("{:.3f}, {:.3f}, {:.3f} mm", feed_min[0], feed_min[1], feed_min[2])},
-                 {"cycle time", fmt::format("{:.2f} min ({:.2f} min cutting)", v.cycle_minutes, v.cut_minutes)},
-                 {"design surface within tolerance", fmt::format("{:.1f}% of {} vertices reached", 100 * v.design.coverage(),
-                                                                 v.design.reached)}};
-    std::vector<SvgHitMarker> markers;
-    for (const VerifyHit& h : v.hits)
-      markers.push_back({h.point, fmt::format("L{} {} {:.2f}", h.line, to_string(h.component), h.depth_mm), h.kind() == "gouge"});
-    sec.svgs.push_back(deviation_map_svg(design.mesh(), v.design.deviation_mm, vo.gouge_tolerance_mm, {}, r.meridian,
-                                         fmt::format("{}: machined deviation of the design surface, hits marked",
-                                                     fs::path(r.file).filename().string()),
-                                         160, markers));
-    html.sections.push_back(std::move(sec));
-    if (!args.quiet) {
+  // A bad --out is refused before anything is read or simulated.
+  pipeline::OutputDir out(args.out);
+  const pipeline::VerifyRun run = pipeline::verify(args.request);
+  pipeline::write_verify(run, out);
+  if (!args.quiet)
+    for (const pipeline::VerifiedProgram& r : run.programs) {
+      const VerifyReport& v = r.report;
       if (v.clean())
         fmt::print("{}: clean, {} motion blocks, min rapid clearance {:.3f} mm, {:.1f}% of the design surface within {} mm\n",
-                   r.file, v.blocks.size(), rapid_all, 100 * v.design.coverage(), vo.gouge_tolerance_mm);
+                   r.file, v.blocks.size(), r.min_rapid_all_mm(), 100 * v.design.coverage(), run.options.gouge_tolerance_mm);
       else
         fmt::print("{}\n", v.first_problem(r.file));
     }
-  }
-  write_file_atomically((out / "verify.json").string(), [&](std::ostream& o) { o << report.dump(1) << "\n"; });
-  write_file_atomically((out / "verify.html").string(), [&](std::ostream& o) { o << report_html(html); });
-  if (bad > 0) {
-    fmt::print(stderr, "flankcam verify: {} of {} program(s) collide or gouge (verify.json)\n", bad, results.size());
+  if (const int bad = run.failing(); bad > 0) {
+    fmt::print(stderr, "flankcam verify: {} of {} program(s) collide or gouge (verify.json)\n", bad, run.programs.size());
     return 4;
   }
   return 0;
@@ -270,10 +42,12 @@ int run_verify(const VerifyArgs& args) {
 Run add_verify_command(CLI::App& app) {
   auto args = std::make_shared<VerifyArgs>();
   CLI::App* cmd = app.add_subcommand("verify", "back-simulate NC programs or APT CL-data against the job's part");
-  cmd->add_option("--job", args->job, "job file (YAML): machine, part, holder, setup, tolerance")->required();
-  cmd->add_option("programs", args->programs, "programs (.nc .ngc .h .mpf) or CL-data (.apt)")->required();
-  cmd->add_option("--out", args->out, "output directory for verify.json and verify.html")->required();
-  cmd->add_option("--tool", args->tools, "T=FILE: tool T's meridian CSV (z_mm,r_mm); default NAME-tool.csv beside the program");
+  cmd->add_option("--job", args->request.job, "job file (YAML): machine, part, holder, setup, tolerance")->required();
+  cmd->add_option("programs", args->request.programs, "programs (.nc .ngc .h .mpf) or CL-data (.apt)")->required();
+  cmd->add_option("--out", args->out, "output directory for verify.json and verify.html (written completely or not at all)")
+      ->required();
+  cmd->add_option("--tool", args->request.tools,
+                  "T=FILE: tool T's meridian CSV (z_mm,r_mm); default NAME-tool.csv beside the program");
   cmd->add_flag("--quiet", args->quiet, "no summary on stdout");
   return [args] { return run_verify(*args); };
 }

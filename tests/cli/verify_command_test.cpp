@@ -1,0 +1,140 @@
+// `flankcam verify` through the real program: the run's own program is clean, a program with one
+// cutting block moved 1 mm into the blade is refused naming that line, a bad --out writes nothing.
+#include <doctest/doctest.h>
+
+#include <fmt/format.h>
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <regex>
+#include <sstream>
+
+#include "tests/test_util.h"
+
+using namespace flankcam;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Output {
+  int code = -1;
+  std::string out, err;
+};
+
+// Runs flankcam with `args`, keeping stdout and stderr.
+Output run_program(const std::string& args, const test::ScratchDir& dir) {
+  const std::string out = dir.file("stdout.txt"), err = dir.file("stderr.txt");
+  const int status = std::system((std::string(FLANKCAM_BINARY) + " " + args + " > " + out + " 2> " + err).c_str());
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, test::read_text(out), test::read_text(err)};
+}
+
+std::vector<std::string> split_lines(const std::string& text) {
+  std::vector<std::string> lines;
+  std::istringstream in(text);
+  for (std::string l; std::getline(in, l);) lines.push_back(l);
+  return lines;
+}
+
+// `lines` with the given coordinate of line `index` (0-based) moved by `delta_mm`.
+std::string moved(std::vector<std::string> lines, size_t index, char axis, double delta_mm) {
+  const std::regex word(std::string(1, axis) + R"((-?[0-9]+\.?[0-9]*))");
+  std::smatch m;
+  REQUIRE(std::regex_search(lines[index], m, word));
+  lines[index] = m.prefix().str() + fmt::format("{}{:.4f}", axis, std::stod(m[1].str()) + delta_mm) + m.suffix().str();
+  std::string text;
+  for (const std::string& l : lines) text += l + "\n";
+  return text;
+}
+
+}  // namespace
+
+TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm into the blade is refused naming its line") {
+  test::ScratchDir dir("verify");
+  const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/conical-tool/job.yaml";
+  const std::string run = dir.file("run");
+  {
+    const Output r = run_program("run " + job + " --quiet --out " + run, dir);
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+  }
+  const std::string program = (fs::path(run) / "cone-1.ngc").string();
+
+  SUBCASE("the posted program is clean") {
+    const Output r = run_program("verify --job " + job + " " + program + " --out " + dir.file("v"), dir);
+    INFO(r.out, r.err);
+    CHECK(r.code == 0);
+    REQUIRE(fs::is_regular_file(dir.file("v/verify.json")));
+    CHECK(fs::is_regular_file(dir.file("v/verify.html")));
+    const auto report = nlohmann::json::parse(test::read_text(dir.file("v/verify.json")));
+    REQUIRE(report["programs"].size() == 1);
+    const auto& p = report["programs"][0];
+    CHECK(p["clean"] == true);
+    CHECK(p["collisions_and_gouges"].empty());
+    CHECK(int(p["motion_blocks"]) > 50);
+    // Rapids keep the job's clearance (1 mm); the cutter reaches most of the patch's side.
+    CHECK(double(p["min_clearance_rapid_mm"]["cutter"]) >= 0.9);
+    CHECK(double(p["design_surface"]["coverage"]) > 0.5);
+    CHECK(r.out.find("cone-1.ngc: clean") != std::string::npos);
+  }
+
+  SUBCASE("one cutting block moved 1 mm sideways into the blade: exit 4 naming that line") {
+    // A modal feed block well inside the cut: 20 lines after the first G1.
+    const std::vector<std::string> lines = split_lines(test::read_text(program));
+    size_t g1 = 0;
+    while (g1 < lines.size() && lines[g1].find("G1 ") == std::string::npos) ++g1;
+    REQUIRE(g1 + 20 < lines.size());
+    const size_t index = g1 + 20;
+    for (size_t k = g1; k <= index; ++k) REQUIRE(lines[k].find("G0") == std::string::npos);
+    REQUIRE(lines[index].find('Z') != std::string::npos);
+    const int line = int(index) + 1;
+    // On the table-table machine the tool stands along machine Z; 1 mm along machine X moves the
+    // cutter into the blade on one side and away from it on the other.
+    int refused = 0;
+    for (const double delta : {-1.0, 1.0}) {
+      CAPTURE(delta);
+      const fs::path bad = fs::path(run) / "bad-1.ngc";  // beside cone-1-tool.csv under another name
+      test::write_text(bad.string(), moved(lines, index, 'X', delta));
+      fs::copy_file(fs::path(run) / "cone-1-tool.csv", fs::path(run) / "bad-1-tool.csv", fs::copy_options::overwrite_existing);
+      const std::string out = dir.file(fmt::format("bad{}", delta > 0 ? "+" : "-"));
+      const Output r = run_program("verify --job " + job + " " + bad.string() + " --out " + out, dir);
+      INFO(r.out, r.err);
+      REQUIRE((r.code == 0 || r.code == 4));
+      REQUIRE(fs::is_regular_file(out + "/verify.json"));  // written either way
+      if (r.code == 0) continue;
+      ++refused;
+      CHECK(r.out.find(fmt::format("bad-1.ngc:{}:", line)) != std::string::npos);
+      CHECK(r.err.find("1 of 1 program(s) collide or gouge") != std::string::npos);
+      const auto report = nlohmann::json::parse(test::read_text(out + "/verify.json"));
+      const auto& p = report["programs"][0];
+      CHECK(p["clean"] == false);
+      REQUIRE(!p["collisions_and_gouges"].empty());
+      bool at_line = false;
+      for (const auto& h : p["collisions_and_gouges"]) {
+        at_line |= int(h["line"]) == line;
+        CHECK(double(h["depth_mm"]) > 0.01);  // beyond the tolerance
+        CHECK(double(h["depth_mm"]) < 1.1);   // no deeper than the move
+      }
+      CHECK(at_line);
+    }
+    CHECK(refused == 1);
+  }
+
+  SUBCASE("--out naming an existing file: exit 2, nothing written") {
+    const std::string file = dir.file("taken.txt");
+    test::write_text(file, "keep me\n");
+    size_t entries = 0;
+    for (const auto& e : fs::directory_iterator(dir.path)) entries += e.path().filename() != "stdout.txt" && e.path().filename() != "stderr.txt";
+    const Output r = run_program("verify --job " + job + " " + program + " --out " + file, dir);
+    INFO(r.out, r.err);
+    CHECK(r.code == 2);
+    CHECK(r.err.find("--out") != std::string::npos);
+    CHECK(r.out.empty());
+    CHECK(test::read_text(file) == "keep me\n");
+    size_t after = 0;
+    for (const auto& e : fs::directory_iterator(dir.path)) after += e.path().filename() != "stdout.txt" && e.path().filename() != "stderr.txt";
+    CHECK(after == entries);
+    CHECK(!fs::exists(fs::path(run) / "verify.json"));
+  }
+}
