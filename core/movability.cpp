@@ -214,7 +214,7 @@ Walk walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, Mov
       // its sweep (one end's footpoints on the boundary, the other end's not), slide it back along
       // itself. Sliding is not a motion of the line, but without it a curved sweep leaves Φ over
       // one end and stopped at the boundary half way (helix envelopes: half the surface).
-      const int n = o.movability.samples;
+      const int n = int(m.footpoints.size());  // none for a line that is not finite
       int lead = 0, trail = 0;
       while (lead < n && m.footpoints[size_t(lead)].on_boundary) ++lead;
       while (trail < n && m.footpoints[size_t(n - 1 - trail)].on_boundary) ++trail;

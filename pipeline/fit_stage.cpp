@@ -70,13 +70,23 @@ ToolAssembly assembly_of(const Job& job, const Similarity& fr, const FitResult& 
 
 }  // namespace
 
+LoadedMesh load_job_surface(const Job& job, const Progress& progress) {
+  const CadMesh surface = load_surface_file(
+      job.surface.string(), job.surface_faces, job.surface_deflection_mm.value_or(surface_deflection_mm(job.tolerance_mm)));
+  if (!surface.note.empty()) progress(job.surface.string() + ": " + surface.note);
+  return surface.loaded;
+}
+
+std::optional<LoadedMesh> load_job_part(const Job& job) {
+  if (!job.part_given) return std::nullopt;
+  return load_part_file(job.part.string(), job.surface.string(), job.surface_faces,
+                        job.part_deflection_mm.value_or(part_deflection_mm(job.clearance_mm)),
+                        job.surface_deflection_mm.value_or(surface_deflection_mm(job.tolerance_mm)))
+      .loaded;
+}
+
 void check_job(const Job& job, FittedJob& f, const Progress& progress) {
-  std::optional<LoadedMesh> separate;
-  if (job.part_given)
-    separate = load_part_file(job.part.string(), job.surface.string(), job.surface_faces,
-                              job.part_deflection_mm.value_or(part_deflection_mm(job.clearance_mm)),
-                              job.surface_deflection_mm.value_or(surface_deflection_mm(job.tolerance_mm)))
-                   .loaded;
+  const std::optional<LoadedMesh> separate = load_job_part(job);
   const TriMesh& part = separate ? separate->mesh : f.surface.mesh;
   progress(fmt::format("collision checks against {} ({} triangles), clearance {} mm", job.part.string(), part.faces.size(),
                        job.clearance_mm));
@@ -194,10 +204,7 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
 
 FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   FittedJob out;
-  const CadMesh surface = load_surface_file(
-      job.surface.string(), job.surface_faces, job.surface_deflection_mm.value_or(surface_deflection_mm(job.tolerance_mm)));
-  if (!surface.note.empty()) progress(job.surface.string() + ": " + surface.note);
-  out.surface = surface.loaded;
+  out.surface = load_job_surface(job, progress);
   const TriMesh& mesh = out.surface.mesh;
   const BoundingBox box = bounding_box(mesh.vertices);
   progress(fmt::format("surface {}: {} vertices, {} triangles, diagonal {:.3f} mm", job.surface.string(),

@@ -61,6 +61,11 @@ inline const std::string detected_job_name = "detected-job.yaml";
 
 // Loads the design surface, fits every patch in the unit-diagonal frame (paper Sec. 4) and runs
 // check_job. The OpenMP loops use however many threads the caller set (see run.h).
+// The job's design surface (a mesh, or STEP/IGES faces tessellated at tolerance / 20 unless the
+// job says otherwise) and its separate part (STEP/IGES at clearance / 10; unset: no `part:`), mm.
+[[nodiscard]] LoadedMesh load_job_surface(const Job& job, const Progress& progress);
+[[nodiscard]] std::optional<LoadedMesh> load_job_part(const Job& job);
+
 [[nodiscard]] FittedJob fit_job(const Job& job, int threads, const Progress& progress);
 
 // Poses in mm, tool assembly, meridian, contact points and the collision and gouge checks of

@@ -99,10 +99,10 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
     given[int(*n)] = read_meridian(t.substr(eq + 1));
   }
   // The part and the design surface on the machine (work frame), as the run checks its programs.
-  const LoadedMesh surface = load_mesh(job.surface.string());
+  const LoadedMesh surface = load_job_surface(job, progress);
   SurfaceIndex design(mesh_to_work(job.post, surface.mesh));
   std::optional<SurfaceIndex> separate;
-  if (job.part != job.surface) separate.emplace(mesh_to_work(job.post, load_mesh(job.part.string()).mesh));
+  if (std::optional<LoadedMesh> part = load_job_part(job)) separate.emplace(mesh_to_work(job.post, std::move(part->mesh)));
   VerifyOptions vo;
   vo.gouge_tolerance_mm = job.tolerance_mm;
   VerifyRun run{std::move(job), std::move(m), vo, std::move(design), {}};
