@@ -64,7 +64,8 @@ TEST_CASE("flankcam run end to end: the program, back-simulated through the mach
     const Eigen::Vector3d a(row[0], row[1], row[2]), b(row[3], row[4], row[5]);
     fitted.push_back({a, (b - a).normalized()});
   }
-  for (const auto& [file, dialect] : {std::pair{"p1.ngc", Dialect::LinuxCnc}, std::pair{"p1.nc", Dialect::Iso}}) {
+  for (const auto& [file_, dialect] : {std::pair{"p1.ngc", Dialect::LinuxCnc}, std::pair{"p1.nc", Dialect::Iso}}) {
+    const std::string file = file_;  // a copy: CAPTURE's lambda may not name a structured binding (C++17)
     CAPTURE(file);
     const auto points = parse_nc(test::read_text(dir.file(std::string("out/") + file)), dialect, {"A", "C"}, file);
     // Every fitted pose is a program point, in order (4 decimals of mm and degrees).

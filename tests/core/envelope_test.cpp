@@ -44,7 +44,8 @@ TEST_CASE("an envelope point satisfies the two envelope conditions and the spher
 
 TEST_CASE("every profile under every motion: axis samples lie at distance d(s) from the envelope mesh") {
   for (const char* kind : {"twist", "arc", "helix", "s-curve"})
-    for (const auto& [name, profile] : profiles()) {
+    for (const auto& [name_, profile] : profiles()) {
+      const std::string name = name_;  // a copy: CAPTURE's lambda may not name a structured binding (C++17)
       CAPTURE(kind);
       CAPTURE(name);
       AnalyticMotionOptions o;
