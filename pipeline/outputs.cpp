@@ -109,12 +109,8 @@ ViewerScene viewer_scene(const Job& job, const FittedJob& fitted, const std::vec
     names.push_back(vp.name);
     v.patches.push_back(std::move(vp));
   }
-  const ToolPose o = to_work(job.post, {Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ()});
-  const ToolPose x = to_work(job.post, {Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitX()});
-  const ToolPose y = to_work(job.post, {Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitY()});
-  Eigen::Matrix3d R_work_part;
-  R_work_part << x.axis, y.axis, o.axis;
-  const Eigen::Matrix3d R = R_work_part.transpose();
+  const ToolPose o = to_work(job.post, {Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ()});  // o.tip: the translation
+  const Eigen::Matrix3d R = setup_rotation(job.post).transpose();  // work -> part
   const std::array<std::string, 2> rotary{machine.rotary[0].name, machine.rotary[1].name};
   for (const PostedProgram& w : programs)
     if (w.dialect == programs.front().dialect) v.tracks.push_back(viewer_track(w.posted, w.file, rotary, R, -R * o.tip, names));

@@ -105,6 +105,11 @@ ToolPose to_work(const PostJob& post, const ToolPose& p) {
   return {R * p.tip + t, (R * p.axis).normalized()};
 }
 
+TriMesh to_work(const PostJob& post, TriMesh mesh) {
+  for (Eigen::Vector3d& v : mesh.vertices) v = to_work(post, {v, Eigen::Vector3d::UnitZ()}).tip;
+  return mesh;
+}
+
 double tool_length(const Job& job, const FittedPatch& p) {
   if (job.post.tool_length_mm > 0) return job.post.tool_length_mm;
   return job.holder.length + job.holder.cylinder_length + job.holder.shank_length + p.assembly.cutter_length();
@@ -133,9 +138,7 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
   if (inputs.empty()) return r;
   // The part placed on the machine (work frame): the links are planned against it, and every
   // program is back-simulated from its text before anything is written.
-  TriMesh part_work = r.fit.fitted.part ? *r.fit.fitted.part : r.fit.fitted.surface.mesh;
-  for (Eigen::Vector3d& v : part_work.vertices) v = to_work(j.post, {v, Eigen::Vector3d::UnitZ()}).tip;
-  const SurfaceIndex part_index(std::move(part_work));
+  const SurfaceIndex part_index(to_work(j.post, r.fit.fitted.part ? *r.fit.fitted.part : r.fit.fitted.surface.mesh));
   PostSettings settings = r.settings;  // r.settings must not keep a pointer to part_index
   settings.options.part = &part_index;
   settings.options.clearance_mm = j.clearance_mm;

@@ -74,6 +74,8 @@ void check_fit_outputs(const Job& job);
 
 // The part's placement on the machine (post.setup): part frame -> work frame.
 [[nodiscard]] ToolPose to_work(const PostJob& post, const ToolPose& p);
+// A mesh (the part, the design surface) placed on the machine the same way.
+[[nodiscard]] TriMesh to_work(const PostJob& post, TriMesh mesh);
 // Spindle nose to tip: post.tool_length, else holder + shank + cutter lengths.
 [[nodiscard]] double tool_length(const Job& job, const FittedPatch& p);
 

@@ -34,11 +34,6 @@ std::string read_text(const std::string& path) {
   return ss.str();
 }
 
-// The part's placement on the machine (post.setup), as the run places it.
-TriMesh mesh_to_work(const PostJob& post, TriMesh mesh) {
-  for (Eigen::Vector3d& v : mesh.vertices) v = to_work(post, {v, Eigen::Vector3d::UnitZ()}).tip;
-  return mesh;
-}
 
 // The tool names a program's tool-change comments give: "T2 cone-2 D.. L.." -> {2: "cone-2"}.
 std::map<int, std::string> tool_names(const std::string& text) {
@@ -100,9 +95,9 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
   }
   // The part and the design surface on the machine (work frame), as the run checks its programs.
   const LoadedMesh surface = load_job_surface(job, progress);
-  SurfaceIndex design(mesh_to_work(job.post, surface.mesh));
+  SurfaceIndex design(to_work(job.post, surface.mesh));
   std::optional<SurfaceIndex> separate;
-  if (std::optional<LoadedMesh> part = load_job_part(job)) separate.emplace(mesh_to_work(job.post, std::move(part->mesh)));
+  if (std::optional<LoadedMesh> part = load_job_part(job)) separate.emplace(to_work(job.post, std::move(part->mesh)));
   VerifyOptions vo;
   vo.gouge_tolerance_mm = job.tolerance_mm;
   VerifyRun run{std::move(job), std::move(m), vo, std::move(design), {}};
