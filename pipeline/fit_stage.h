@@ -58,6 +58,9 @@ struct FittedJob {
 [[nodiscard]] std::string detected_job_yaml(const Job& job, const FittedJob& fitted);
 // The name of that file in the output folder.
 inline const std::string detected_job_name = "detected-job.yaml";
+// `patches: auto`: the pictures of the whole surface (which patch machines each point; the union's deviation).
+inline const std::string cover_owner_svg_name = "surface-patches.svg";
+inline const std::string cover_deviation_svg_name = "surface-deviation.svg";
 
 // Loads the design surface, fits every patch in the unit-diagonal frame (paper Sec. 4) and runs
 // check_job. The OpenMP loops use however many threads the caller set (see run.h).

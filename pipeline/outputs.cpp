@@ -123,6 +123,25 @@ ViewerScene viewer_scene(const Job& job, const FittedJob& fitted, const std::vec
   return v;
 }
 
+// `patches: auto`: the whole surface, which patch machines each point and the union's deviation.
+HtmlSection cover_section(OutputDir& out, const Job& job, const FittedJob& fitted) {
+  const CoverResult& c = *fitted.cover;
+  std::vector<std::string> names;
+  for (const FittedPatch& p : fitted.patches) names.push_back(p.job->name);
+  HtmlSection section;
+  section.heading = "Whole surface";
+  section.facts = {{"patches", fmt::format("{} (stopped: {})", fitted.patches.size(), c.stop)},
+                   {"coverage within tolerance", fmt::format("{:.1f}% within {} mm", 100 * c.coverage, job.tolerance_mm)},
+                   {"worst overcut", fmt::format("{:.4f} mm", c.overcut_mm)}};
+  section.svgs = {patch_owner_svg(fitted.surface.mesh, c.owner, names, "Which patch machines each point of the design surface"),
+                  deviation_map_svg(fitted.surface.mesh, c.deviation_mm, job.tolerance_mm, {}, {},
+                                    "Signed deviation of the design surface from all patches together", 160, {},
+                                    "machined by no patch")};
+  section.files = {cover_owner_svg_name, cover_deviation_svg_name};
+  for (size_t i = 0; i < section.svgs.size(); ++i) write_text(out, section.files[i], section.svgs[i]);
+  return section;
+}
+
 }  // namespace
 
 std::vector<std::vector<std::string>> write_fit(const FitRun& run, OutputDir& out) {
@@ -265,6 +284,7 @@ std::vector<std::vector<std::string>> write_run(const RunResult& run, OutputDir&
     html.sections.push_back(std::move(section));
     all_files.push_back(std::move(files));
   }
+  if (fitted.cover) html.sections.insert(html.sections.begin(), cover_section(out, job, fitted));
   nlohmann::ordered_json all = nlohmann::ordered_json::array();
   for (const PostedProgram& w : programs)
     if (w.patch.empty()) all.push_back(program_report(w, machine));

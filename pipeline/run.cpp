@@ -82,7 +82,11 @@ Machine check_run(const Job& job) {
   OutputPlan plan;
   plan.add("report.json", "the report");
   plan.add("report.html", "the report");
-  if (job.cover) plan.add(detected_job_name, "the detected patches (patches: auto)");
+  if (job.cover) {
+    plan.add(detected_job_name, "the detected patches (patches: auto)");
+    plan.add(cover_owner_svg_name, "the report (patches: auto)");
+    plan.add(cover_deviation_svg_name, "the report (patches: auto)");
+  }
   const std::vector<Dialect> dialects = dialects_of(machine, settings);
   for (const PatchJob& p : job.patches) {
     plan_fit_files(p.name, job.post.tool, job.post.apt, job.post.cl, plan);

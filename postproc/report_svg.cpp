@@ -54,37 +54,154 @@ double tick_step(double span, int n) {
 
 }  // namespace
 
-std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& dev, double tol,
-                              const std::vector<ToolPose>& poses, const std::vector<Eigen::Vector2d>& profile,
-                              const std::string& title, int columns, const std::vector<SvgHitMarker>& hits) {
-  // View along the area-weighted mean normal of the faces with a deviation (all faces if none).
+namespace {
+
+// The surface seen along the area-weighted mean normal v of the faces whose three vertices are
+// `defined` (all faces if none or no such face); picture x along the surface's longest extent u.
+struct SurfaceView {
+  Eigen::Vector3d mean, u, v, w;
+  [[nodiscard]] Eigen::Vector2d project(const Eigen::Vector3d& p) const { return {(p - mean).dot(u), (p - mean).dot(w)}; }
+};
+
+SurfaceView view_along_mean_normal(const TriMesh& mesh, const std::vector<bool>& defined) {
   Eigen::Vector3d normal = Eigen::Vector3d::Zero();
   for (int pass = 0; pass < 2 && normal.norm() < 1e-12; ++pass)
     for (const auto& f : mesh.faces) {
-      if (pass == 0 && !(std::isfinite(dev[size_t(f[0])]) && std::isfinite(dev[size_t(f[1])]) && std::isfinite(dev[size_t(f[2])])))
-        continue;
+      if (pass == 0 && !(defined[size_t(f[0])] && defined[size_t(f[1])] && defined[size_t(f[2])])) continue;
       const Eigen::Vector3d &a = mesh.vertices[size_t(f[0])], &b = mesh.vertices[size_t(f[1])], &c = mesh.vertices[size_t(f[2])];
       normal += (b - a).cross(c - a);
     }
-  const Eigen::Vector3d v = normal.norm() > 1e-12 ? normal.normalized() : Eigen::Vector3d::UnitZ();
-  // Picture x along the surface's longest extent in the view plane.
-  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-  for (const auto& p : mesh.vertices) mean += p;
-  mean /= double(std::max<size_t>(1, mesh.vertices.size()));
+  SurfaceView view;
+  view.v = normal.norm() > 1e-12 ? normal.normalized() : Eigen::Vector3d::UnitZ();
+  view.mean = Eigen::Vector3d::Zero();
+  for (const auto& p : mesh.vertices) view.mean += p;
+  view.mean /= double(std::max<size_t>(1, mesh.vertices.size()));
   Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
-  const Eigen::Matrix3d flat = Eigen::Matrix3d::Identity() - v * v.transpose();
+  const Eigen::Matrix3d flat = Eigen::Matrix3d::Identity() - view.v * view.v.transpose();
   for (const auto& p : mesh.vertices) {
-    const Eigen::Vector3d q = flat * (p - mean);
+    const Eigen::Vector3d q = flat * (p - view.mean);
     cov += q * q.transpose();
   }
-  Eigen::Vector3d u = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvectors().col(2);
-  if (u.dot(Eigen::Vector3d(1, 1, 1)) < 0) u = -u;  // a fixed sign: same input, same picture
-  const Eigen::Vector3d w = v.cross(u);
-  const auto project = [&](const Eigen::Vector3d& p) { return Eigen::Vector2d((p - mean).dot(u), (p - mean).dot(w)); };
+  view.u = Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(cov).eigenvectors().col(2);
+  if (view.u.dot(Eigen::Vector3d(1, 1, 1)) < 0) view.u = -view.u;  // a fixed sign: same input, same picture
+  view.w = view.v.cross(view.u);
+  return view;
+}
+
+// The surface rasterised in the view: per cell the front-most face covering its centre, the
+// per-vertex `values` interpolated there and the face's vertex nearest the centre.
+struct Raster {
+  Eigen::Vector2d lo, hi;  // picture bounds, mm
+  double cell = 1;         // mm
+  int nx = 1, ny = 1;
+  std::vector<bool> covered;
+  std::vector<double> value;
+  std::vector<int> vertex;
+};
+
+Raster rasterise(const TriMesh& mesh, const SurfaceView& view, const std::vector<double>& values, int columns,
+                 const std::vector<Eigen::Vector2d>& also_in_view) {
+  Raster r;
+  r.lo = Eigen::Vector2d(1e300, 1e300), r.hi = Eigen::Vector2d(-1e300, -1e300);
+  for (const auto& p : mesh.vertices) r.lo = r.lo.cwiseMin(view.project(p)), r.hi = r.hi.cwiseMax(view.project(p));
+  for (const auto& q : also_in_view) r.lo = r.lo.cwiseMin(q), r.hi = r.hi.cwiseMax(q);
+  r.cell = std::max(r.hi.x() - r.lo.x(), (r.hi.y() - r.lo.y()) * 0.75) / columns;
+  if (!(r.cell > 0)) r.cell = 1;
+  r.nx = std::max(1, int(std::ceil((r.hi.x() - r.lo.x()) / r.cell)));
+  r.ny = std::max(1, int(std::ceil((r.hi.y() - r.lo.y()) / r.cell)));
+  const size_t cells = size_t(r.nx) * size_t(r.ny);
+  std::vector<double> depth(cells, -std::numeric_limits<double>::infinity());
+  r.covered.assign(cells, false);
+  r.value.assign(cells, std::numeric_limits<double>::quiet_NaN());
+  r.vertex.assign(cells, -1);
+  for (const auto& f : mesh.faces) {
+    const Eigen::Vector2d a = view.project(mesh.vertices[size_t(f[0])]), b = view.project(mesh.vertices[size_t(f[1])]),
+                          c = view.project(mesh.vertices[size_t(f[2])]);
+    const double area = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
+    if (std::abs(area) < 1e-300) continue;
+    const int x0 = std::max(0, int((std::min({a.x(), b.x(), c.x()}) - r.lo.x()) / r.cell - 0.5));
+    const int x1 = std::min(r.nx - 1, int((std::max({a.x(), b.x(), c.x()}) - r.lo.x()) / r.cell + 0.5));
+    const int y0 = std::max(0, int((std::min({a.y(), b.y(), c.y()}) - r.lo.y()) / r.cell - 0.5));
+    const int y1 = std::min(r.ny - 1, int((std::max({a.y(), b.y(), c.y()}) - r.lo.y()) / r.cell + 0.5));
+    for (int iy = y0; iy <= y1; ++iy)
+      for (int ix = x0; ix <= x1; ++ix) {
+        const Eigen::Vector2d p = r.lo + r.cell * Eigen::Vector2d(ix + 0.5, iy + 0.5);
+        const double l1 = ((b - p).x() * (c - p).y() - (b - p).y() * (c - p).x()) / area;
+        const double l2 = ((c - p).x() * (a - p).y() - (c - p).y() * (a - p).x()) / area;
+        const double l3 = 1 - l1 - l2;
+        if (l1 < -1e-9 || l2 < -1e-9 || l3 < -1e-9) continue;
+        const double d = l1 * mesh.vertices[size_t(f[0])].dot(view.v) + l2 * mesh.vertices[size_t(f[1])].dot(view.v) +
+                         l3 * mesh.vertices[size_t(f[2])].dot(view.v);
+        const size_t k = size_t(iy) * size_t(r.nx) + size_t(ix);
+        if (d <= depth[k]) continue;
+        depth[k] = d;
+        r.covered[k] = true;
+        if (!values.empty())
+          r.value[k] = l1 * values[size_t(f[0])] + l2 * values[size_t(f[1])] + l3 * values[size_t(f[2])];
+        r.vertex[k] = f[l1 >= l2 && l1 >= l3 ? 0 : (l2 >= l3 ? 1 : 2)];
+      }
+  }
+  return r;
+}
+
+// The picture's frame: 640 px across the raster, a title above and a legend band below.
+struct Canvas {
+  double scale = 1, margin = 20, top = 36, legend = 60, width = 0, height = 0;
+  Eigen::Vector2d lo, hi;
+  Canvas(const Raster& r, double legend_height) : scale(640.0 / (r.nx * r.cell)), legend(legend_height), lo(r.lo), hi(r.hi) {
+    width = 640 + 2 * margin;
+    height = top + r.ny * r.cell * scale + legend + margin;
+  }
+  [[nodiscard]] double sx(double x) const { return margin + (x - lo.x()) * scale; }
+  [[nodiscard]] double sy(double y) const { return top + (hi.y() - y) * scale; }
+};
+
+// The covered cells, one rect per run of equal colour in a row.
+template <class Colour>
+std::string cells_svg(const Raster& r, const Canvas& cv, const Colour& colour_of) {
+  std::string s = R"(<g shape-rendering="crispEdges">)"
+                  "\n";
+  for (int iy = 0; iy < r.ny; ++iy)
+    for (int ix = 0; ix < r.nx;) {
+      const size_t k = size_t(iy) * size_t(r.nx) + size_t(ix);
+      if (!r.covered[k]) {
+        ++ix;
+        continue;
+      }
+      const std::string colour = colour_of(k);
+      int run = 1;
+      while (ix + run < r.nx && r.covered[k + size_t(run)] && colour_of(k + size_t(run)) == colour) ++run;
+      s += fmt::format(R"(<rect x="{}" y="{}" width="{}" height="{}" fill="{}"/>)"
+                       "\n",
+                       num(cv.sx(r.lo.x() + ix * r.cell)), num(cv.sy(r.lo.y() + (iy + 1) * r.cell)),
+                       num(run * r.cell * cv.scale + 0.3), num(r.cell * cv.scale + 0.3), colour);
+      ix += run;
+    }
+  return s + "</g>\n";
+}
+
+std::string swatch(double x, double y, const std::string& colour) {
+  return fmt::format(R"(<rect x="{}" y="{}" width="14" height="14" fill="{}"/>)"
+                     "\n",
+                     num(x), num(y), colour);
+}
+
+}  // namespace
+
+std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& dev, double tol,
+                              const std::vector<ToolPose>& poses, const std::vector<Eigen::Vector2d>& profile,
+                              const std::string& title, int columns, const std::vector<SvgHitMarker>& hits,
+                              const std::string& uncut_label) {
+  std::vector<bool> defined(dev.size());
+  for (size_t i = 0; i < dev.size(); ++i) defined[i] = std::isfinite(dev[i]);
+  const SurfaceView view = view_along_mean_normal(mesh, defined);
+  const Eigen::Vector3d &u = view.u, &w = view.w;
+  const auto project = [&](const Eigen::Vector3d& p) { return view.project(p); };
 
   // The tool at a few poses: its silhouette seen along v (outline, then the axis from tip to end).
   std::vector<std::vector<Eigen::Vector2d>> outlines;
   std::vector<std::array<Eigen::Vector2d, 2>> axes;
+  std::vector<Eigen::Vector2d> outline_points;
   const size_t shown = std::min<size_t>(5, poses.size());
   for (size_t i = 0; i < shown && profile.size() >= 2; ++i) {
     const ToolPose& p = poses[shown == 1 ? 0 : i * (poses.size() - 1) / (shown - 1)];
@@ -94,84 +211,29 @@ std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& de
     std::vector<Eigen::Vector2d> outline;
     for (size_t k = 0; k < profile.size(); ++k) outline.push_back(project(p.tip + profile[k].x() * p.axis) + profile[k].y() * side);
     for (size_t k = profile.size(); k-- > 0;) outline.push_back(project(p.tip + profile[k].x() * p.axis) - profile[k].y() * side);
+    outline_points.insert(outline_points.end(), outline.begin(), outline.end());
     outlines.push_back(outline);
     axes.push_back({project(p.tip), project(p.tip + profile.back().x() * p.axis)});
   }
-  Eigen::Vector2d lo(1e300, 1e300), hi(-1e300, -1e300);
-  for (const auto& p : mesh.vertices) lo = lo.cwiseMin(project(p)), hi = hi.cwiseMax(project(p));
-  for (const auto& o : outlines)
-    for (const auto& q : o) lo = lo.cwiseMin(q), hi = hi.cwiseMax(q);
-  const double cell = std::max(hi.x() - lo.x(), (hi.y() - lo.y()) * 0.75) / columns;
-  const int nx = std::max(1, int(std::ceil((hi.x() - lo.x()) / cell))), ny = std::max(1, int(std::ceil((hi.y() - lo.y()) / cell)));
-  // Rasterise: per cell the value of the front-most face covering its centre.
-  std::vector<double> depth(size_t(nx * ny), -std::numeric_limits<double>::infinity());
-  std::vector<double> value(size_t(nx * ny), std::numeric_limits<double>::quiet_NaN());
-  std::vector<bool> covered(size_t(nx * ny), false);
-  for (const auto& f : mesh.faces) {
-    const Eigen::Vector2d a = project(mesh.vertices[size_t(f[0])]), b = project(mesh.vertices[size_t(f[1])]),
-                          c = project(mesh.vertices[size_t(f[2])]);
-    const double area = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
-    if (std::abs(area) < 1e-300) continue;
-    const int x0 = std::max(0, int((std::min({a.x(), b.x(), c.x()}) - lo.x()) / cell - 0.5));
-    const int x1 = std::min(nx - 1, int((std::max({a.x(), b.x(), c.x()}) - lo.x()) / cell + 0.5));
-    const int y0 = std::max(0, int((std::min({a.y(), b.y(), c.y()}) - lo.y()) / cell - 0.5));
-    const int y1 = std::min(ny - 1, int((std::max({a.y(), b.y(), c.y()}) - lo.y()) / cell + 0.5));
-    for (int iy = y0; iy <= y1; ++iy)
-      for (int ix = x0; ix <= x1; ++ix) {
-        const Eigen::Vector2d p = lo + cell * Eigen::Vector2d(ix + 0.5, iy + 0.5);
-        const double l1 = ((b - p).x() * (c - p).y() - (b - p).y() * (c - p).x()) / area;
-        const double l2 = ((c - p).x() * (a - p).y() - (c - p).y() * (a - p).x()) / area;
-        const double l3 = 1 - l1 - l2;
-        if (l1 < -1e-9 || l2 < -1e-9 || l3 < -1e-9) continue;
-        const double d = l1 * mesh.vertices[size_t(f[0])].dot(v) + l2 * mesh.vertices[size_t(f[1])].dot(v) +
-                         l3 * mesh.vertices[size_t(f[2])].dot(v);
-        const size_t k = size_t(iy * nx + ix);
-        if (d <= depth[k]) continue;
-        depth[k] = d;
-        covered[k] = true;
-        value[k] = l1 * dev[size_t(f[0])] + l2 * dev[size_t(f[1])] + l3 * dev[size_t(f[2])];
-      }
-  }
-
-  const double scale = 640.0 / (nx * cell), margin = 20, top = 36, legend = 60;
-  const double width = 640 + 2 * margin, height = top + ny * cell * scale + legend + margin;
-  const auto sx = [&](double x) { return margin + (x - lo.x()) * scale; };
-  const auto sy = [&](double y) { return top + (hi.y() - y) * scale; };
-  std::string s = header(width, height);
-  s += text(margin, 22, title, R"(font-size="14" font-weight="bold")");
-  s += R"(<g shape-rendering="crispEdges">)"
-       "\n";
-  for (int iy = 0; iy < ny; ++iy)
-    for (int ix = 0; ix < nx;) {
-      const size_t k = size_t(iy * nx + ix);
-      if (!covered[k]) {
-        ++ix;
-        continue;
-      }
-      const std::string colour = hex(deviation_color(value[k], tol));
-      int run = 1;
-      while (ix + run < nx && covered[k + size_t(run)] && hex(deviation_color(value[k + size_t(run)], tol)) == colour) ++run;
-      s += fmt::format(R"(<rect x="{}" y="{}" width="{}" height="{}" fill="{}"/>)"
-                       "\n",
-                       num(sx(lo.x() + ix * cell)), num(sy(lo.y() + (iy + 1) * cell)), num(run * cell * scale + 0.3),
-                       num(cell * scale + 0.3), colour);
-      ix += run;
-    }
-  s += "</g>\n";
+  const Raster r = rasterise(mesh, view, dev, columns, outline_points);
+  const Canvas cv(r, 60);
+  std::string s = header(cv.width, cv.height);
+  s += text(cv.margin, 22, title, R"(font-size="14" font-weight="bold")");
+  s += cells_svg(r, cv, [&](size_t k) { return hex(deviation_color(r.value[k], tol)); });
   for (size_t i = 0; i < outlines.size(); ++i) {
     std::string pts;
-    for (const auto& q : outlines[i]) pts += num(sx(q.x())) + "," + num(sy(q.y())) + " ";
+    for (const auto& q : outlines[i]) pts += num(cv.sx(q.x())) + "," + num(cv.sy(q.y())) + " ";
     pts.pop_back();
     s += fmt::format(R"(<polygon points="{}" fill="#000000" fill-opacity="0.06" stroke="#222222" stroke-width="1"/>)"
                      "\n",
                      pts);
-    s += line(sx(axes[i][0].x()), sy(axes[i][0].y()), sx(axes[i][1].x()), sy(axes[i][1].y()),
+    s += line(cv.sx(axes[i][0].x()), cv.sy(axes[i][0].y()), cv.sx(axes[i][1].x()), cv.sy(axes[i][1].y()),
               R"(stroke="#222222" stroke-dasharray="6 3")");
   }
   // Collisions and gouges: a ring with a cross, labelled (at most 12 labels, the rest unlabelled).
   for (size_t i = 0; i < hits.size(); ++i) {
     const Eigen::Vector2d q = project(hits[i].point);
-    const double x = sx(q.x()), y = sy(q.y());
+    const double x = cv.sx(q.x()), y = cv.sy(q.y());
     const std::string colour = hits[i].gouge ? "#ff8c00" : "#d000d0";
     s += fmt::format(R"(<circle cx="{}" cy="{}" r="7" fill="none" stroke="{}" stroke-width="2.5"/>)"
                      "\n",
@@ -181,7 +243,7 @@ std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& de
     if (i < 12) s += text(x + 9, y - 6, hits[i].label, fmt::format(R"(font-size="10" fill="{}")", colour));
   }
   // Legend: -4 tol .. +4 tol.
-  const double ly = height - legend + 10, lw = 300;
+  const double ly = cv.height - cv.legend + 10, lw = 300, margin = cv.margin;
   for (int k = 0; k < 64; ++k) {
     const double d = (-4 + 8 * (k + 0.5) / 64) * tol;
     s += fmt::format(R"(<rect x="{}" y="{}" width="{}" height="14" fill="{}"/>)"
@@ -195,10 +257,50 @@ std::string deviation_map_svg(const TriMesh& mesh, const std::vector<double>& de
   }
   s += text(margin + lw + 40, ly + 11, "signed deviation, mm: blue overcut,");
   s += text(margin + lw + 40, ly + 25, "green within tolerance, red undercut");
-  s += fmt::format(R"(<rect x="{}" y="{}" width="14" height="14" fill="{}"/>)"
-                   "\n",
-                   num(margin + lw + 40), num(ly + 32), hex(deviation_color(NAN, tol)));
-  s += text(margin + lw + 60, ly + 44, "not reached by this patch");
+  s += swatch(margin + lw + 40, ly + 32, hex(deviation_color(NAN, tol)));
+  s += text(margin + lw + 60, ly + 44, uncut_label);
+  return s + "</svg>\n";
+}
+
+std::array<unsigned char, 3> patch_color(int patch) {
+  // Qualitative palette (Okabe-Ito, then Tableau), distinct from the deviation greys.
+  static const std::array<std::array<unsigned char, 3>, 12> palette{{{0, 114, 178},
+                                                                     {230, 159, 0},
+                                                                     {0, 158, 115},
+                                                                     {204, 121, 167},
+                                                                     {86, 180, 233},
+                                                                     {213, 94, 0},
+                                                                     {240, 228, 66},
+                                                                     {140, 86, 75},
+                                                                     {148, 103, 189},
+                                                                     {188, 189, 34},
+                                                                     {23, 190, 207},
+                                                                     {127, 60, 141}}};
+  if (patch < 0) return {170, 170, 170};
+  return palette[size_t(patch) % palette.size()];
+}
+
+std::string patch_owner_svg(const TriMesh& mesh, const std::vector<int>& owner, const std::vector<std::string>& names,
+                            const std::string& title, int columns) {
+  std::vector<bool> defined(owner.size());
+  for (size_t i = 0; i < owner.size(); ++i) defined[i] = owner[i] >= 0;
+  const SurfaceView view = view_along_mean_normal(mesh, defined);
+  const Raster r = rasterise(mesh, view, {}, columns, {});
+  const double rows = double((names.size() + 1 + 3) / 4);  // legend: 4 entries a row, "uncovered" last
+  const Canvas cv(r, 12 + 20 * rows);
+  std::string s = header(cv.width, cv.height);
+  s += text(cv.margin, 22, title, R"(font-size="14" font-weight="bold")");
+  s += cells_svg(r, cv, [&](size_t k) {
+    const int v = r.vertex[k];
+    return hex(patch_color(v >= 0 && size_t(v) < owner.size() ? owner[size_t(v)] : -1));
+  });
+  const double ly = cv.height - cv.legend + 6;
+  for (size_t i = 0; i <= names.size(); ++i) {
+    const double x = cv.margin + double(i % 4) * 160, y = ly + double(i / 4) * 20;
+    const bool uncovered = i == names.size();
+    s += swatch(x, y, hex(patch_color(uncovered ? -1 : int(i))));
+    s += text(x + 20, y + 12, uncovered ? "machined by no patch" : names[i]);
+  }
   return s + "</svg>\n";
 }
 

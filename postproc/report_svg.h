@@ -31,7 +31,17 @@ struct SvgHitMarker {
 [[nodiscard]] std::string deviation_map_svg(const TriMesh& surface_mm, const std::vector<double>& deviation_mm, double tol_mm,
                                             const std::vector<ToolPose>& tool_poses,
                                             const std::vector<Eigen::Vector2d>& profile, const std::string& title,
-                                            int columns = 160, const std::vector<SvgHitMarker>& hits = {});
+                                            int columns = 160, const std::vector<SvgHitMarker>& hits = {},
+                                            const std::string& uncut_label = "not reached by this patch");
+
+// Patch colours for pictures of several patches (a fixed qualitative palette; grey for -1, none).
+[[nodiscard]] std::array<unsigned char, 3> patch_color(int patch);
+
+// The surface seen along its mean normal (over the owned vertices), each cell coloured by the patch
+// that machines its nearest vertex (`owner`: index into `names`, -1 none: grey), with a legend.
+[[nodiscard]] std::string patch_owner_svg(const TriMesh& surface_mm, const std::vector<int>& owner,
+                                          const std::vector<std::string>& names, const std::string& title,
+                                          int columns = 160);
 
 // The tool standing on its tip: full silhouette, axis, length, end diameters and cone angle.
 [[nodiscard]] std::string tool_profile_svg(const std::vector<Eigen::Vector2d>& profile, const std::string& title);

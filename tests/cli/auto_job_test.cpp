@@ -97,6 +97,11 @@ TEST_CASE("flankcam run of examples/auto posts the detected patch and reports th
   CHECK(report["patches"][0]["collisions"].empty());
   CHECK(std::filesystem::exists(dir.file("out/auto-1.mpf")));
   CHECK(test::read_text(dir.file("out/report.html")).find("Whole surface: ") != std::string::npos);
+  // The whole surface's pictures: which patch machines each point, and the union's deviation.
+  const std::string html = test::read_text(dir.file("out/report.html"));
+  CHECK(html.find("Which patch machines each point of the design surface") != std::string::npos);
+  CHECK(test::read_text(dir.file("out/surface-patches.svg")).find(">auto-1</text>") != std::string::npos);
+  CHECK(test::read_text(dir.file("out/surface-deviation.svg")).find(">machined by no patch</text>") != std::string::npos);
   // The same detection at one thread: detected-job.yaml byte for byte.
   const auto r1 = test::run_flankcam("run " + job + " --out " + dir.file("one") + " --threads 1", dir);
   REQUIRE(r1.code == 0);
