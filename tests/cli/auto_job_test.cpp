@@ -131,3 +131,27 @@ TEST_CASE("patches: auto on the bundled blade stands every tool tip-down in the 
     for (const auto& row : patch["axis"]) CHECK(double(row[5]) > double(row[2]));  // b above a: holder up
   }
 }
+
+TEST_CASE("the README's main job (examples/auto/blade.yaml) detects, fits and posts the blade without lines, and verify passes it") {
+  test::ScratchDir dir("auto-main");
+  const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/auto/blade.yaml";
+  const auto r = test::run_flankcam("run " + job + " --out " + dir.file("out"), dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  CHECK(double(report["cover"]["coverage"]) >= 0.95);
+  CHECK(double(report["cover"]["overcut_mm"]) <= 0.01);
+  REQUIRE(report["patches"].size() >= 1);
+  CHECK(report["patches"].size() <= 4);
+  std::string programs;
+  for (const auto& patch : report["patches"]) {
+    CAPTURE(std::string(patch["name"]));
+    CHECK(patch["collisions"].empty());
+    REQUIRE(patch["programs"].size() == 1);
+    programs += " " + dir.file("out/" + std::string(patch["programs"][0]["file"]));
+  }
+  // The programs, read back and simulated through the machine against the blade: clean.
+  const auto v = test::run_flankcam("verify --job " + job + programs + " --out " + dir.file("verify"), dir);
+  INFO(v.err);
+  CHECK(v.code == 0);
+}
