@@ -1,8 +1,9 @@
-// The 3D view of a flankcam report (three.js r111 from Debian's libjs-three, inlined). The data is
-// the JSON of postproc/viewer.cpp: meshes as base64 little-endian Float32/Uint32 arrays, deviation
-// bands as bytes, the tool's meridians (z, r) from the tip, the posted programs' frames.
-// URL hash: #track=K&pose=N&marker=M&colour=all|P&hide=envelope,ruled,path,part,tool&view=only
-// (marker: jump to the worst pose of collision M; view=only: the view alone, for screenshots).
+// The 3D view of report.html and verify.html (three.js r111 from Debian's libjs-three, inlined). The
+// data is the JSON of postproc/viewer.cpp: meshes as base64 little-endian Float32/Uint32 arrays,
+// deviation bands as bytes, the tools' meridians (z, r) from the tip, the programs' frames.
+// URL hash: #track=K&pose=N&marker=M&colour=all|P|cK&hide=envelope,ruled,path,part,tool&view=only
+// (colour: all, patch P, or further colouring K such as one verified program; marker: jump to the
+// worst pose of collision M; view=only: the view alone, for screenshots).
 (function () {
   'use strict';
   var fail = window.flankcamViewerFail;
@@ -153,7 +154,7 @@
     // Tracks: the posted programs (and fitted poses of patches without one).
     var tracks = data.tracks.map(function (t) {
       return { name: t.name, axes: t.axes, hasValues: t.has_values, n: t.frames, tip: f32(t.tip), axis: f32(t.axis),
-               values: f32(t.values), rapid: bytes(t.rapid), patch: u32(t.patch) };
+               values: f32(t.values), rapid: bytes(t.rapid), patch: u32(t.patch), line: u32(t.line) };
     });
     var trackSelect = document.getElementById('fcv-track'), colourSelect = document.getElementById('fcv-colour');
     var slider = document.getElementById('fcv-slider'), frameLabel = document.getElementById('fcv-frame');
@@ -170,12 +171,16 @@
       o.textContent = label;
       colourSelect.appendChild(o);
     };
-    addColour('all', 'all patches');
-    data.patches.forEach(function (p, i) { addColour(String(i), p.name); });
+    addColour('all', data.combined);
+    data.patches.forEach(function (p, i) { if (p.bands !== null) addColour(String(i), p.name); });
+    if (data.colourings.length > 1 || data.patches.some(function (p) { return p.bands !== null; }))  // else one is 'all'
+      data.colourings.forEach(function (c, i) { addColour('c' + i, c.name); });
     var setColour = function (v) {
-      var i = parseInt(v, 10);
-      paint(v !== 'all' && i >= 0 && i < data.patches.length ? data.patches[i].bands : data.bands);
-      colourSelect.value = v !== 'all' && i >= 0 && i < data.patches.length ? String(i) : 'all';
+      var c = /^c\d+$/.test(v) ? data.colourings[parseInt(v.slice(1), 10)] : undefined;
+      var i = parseInt(v, 10), p = /^\d+$/.test(v) && i < data.patches.length ? data.patches[i] : undefined;
+      var bands = c ? c.bands : p && p.bands !== null ? p.bands : null;
+      paint(bands !== null ? bands : data.bands);
+      colourSelect.value = bands !== null ? v : 'all';
     };
 
     var current = { track: 0, frame: 0 };
@@ -200,8 +205,10 @@
       var words = [];
       if (t.hasValues) for (var a = 0; a < 5; ++a) words.push(t.axes[a] + ' ' + fmt3(t.values[5 * i + a]));
       readout.textContent = (data.patches[patch] ? data.patches[patch].name : '') + ' \u00b7 ' +
+                            (t.line[i] > 0 ? 'line ' + t.line[i] + ' \u00b7 ' : '') +
                             (t.rapid[i] ? 'rapid' : 'feed') + ' \u00b7 ' +
-                            (t.hasValues ? 'programmed ' + words.join('  ') : 'fitted pose, no program (it collides)') +
+                            (t.hasValues ? 'programmed ' + words.join('  ')
+                                         : t.line[i] > 0 ? 'CL-data, no machine axes' : 'fitted pose, no program (it collides)') +
                             ' \u00b7 tip ' + fmt3(t.tip[3 * i]) + ', ' + fmt3(t.tip[3 * i + 1]) + ', ' + fmt3(t.tip[3 * i + 2]) + ' mm';
       render();
     };
@@ -238,6 +245,11 @@
       normal.add(vb.sub(va).cross(vc.sub(va)));
     }
     if (normal.lengthSq() === 0) normal.set(1, 0, 0);
+    if (sideSum.lengthSq() === 0 && tracks.length > 0) {  // no fitted poses (verify.html): the tool's side from the motion
+      var t0 = tracks[0];
+      for (var s0 = 0; s0 < t0.n; ++s0)
+        if (!t0.rapid[s0]) sideSum.add(new THREE.Vector3(t0.tip[3 * s0], t0.tip[3 * s0 + 1], t0.tip[3 * s0 + 2]).sub(centre));
+    }
     normal.normalize();
     if (sideSum.dot(normal) < 0) normal.negate();
     // Turned 20 degrees about Z so the tool does not hide the surface it cuts.
@@ -280,8 +292,8 @@
     colourSelect.addEventListener('change', function () { setColour(colourSelect.value); render(); });
     var layers = { envelope: envelopeLayer, ruled: ruledLayer, path: pathLayer, part: partLayer, tool: toolLayer };
     Object.keys(layers).forEach(function (name) {
-      var box = document.getElementById('fcv-show-' + name);
-      box.addEventListener('change', function () { layers[name].visible = box.checked; render(); });
+      var box = document.getElementById('fcv-show-' + name);  // none when the scene has no such layer
+      if (box) box.addEventListener('change', function () { layers[name].visible = box.checked; render(); });
     });
     var fromHash = function () {
       var q = {};
@@ -295,7 +307,8 @@
         q.hide.split(',').forEach(function (name) {
           if (!layers[name]) return;
           layers[name].visible = false;
-          document.getElementById('fcv-show-' + name).checked = false;
+          var box = document.getElementById('fcv-show-' + name);
+          if (box) box.checked = false;
         });
       showFrame(q.pose !== undefined ? parseInt(q.pose, 10) || 0 : current.frame);
       if (q.marker !== undefined && jumps[parseInt(q.marker, 10)]) jump(jumps[parseInt(q.marker, 10)]);
