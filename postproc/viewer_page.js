@@ -133,13 +133,15 @@
     });
 
     // Markers: collisions and gouges, each jumps to its worst pose.
-    var markerSize = 0.012 * radius;
+    var markerSize = 0.018 * radius;
     var markerList = document.getElementById('fcv-markers');
     var jumps = [];
     data.patches.forEach(function (p) {
       p.markers.forEach(function (mk) {
+        // Drawn over everything: the tool at the marker's pose stands where the marker is.
         var s = new THREE.Mesh(new THREE.SphereBufferGeometry(markerSize, 16, 12),
-                               new THREE.MeshBasicMaterial({ color: 0xff2060 }));
+                               new THREE.MeshBasicMaterial({ color: 0xff2060, depthTest: false }));
+        s.renderOrder = 10;
         s.position.set(mk.at[0], mk.at[1], mk.at[2]);
         markerLayer.add(s);
         var b = document.createElement('button');
