@@ -57,7 +57,7 @@ ViewerScene verify_page_view(const VerifyRun& run) {
   for (const VerifiedProgram& p : run.programs)
     programs.push_back({fs::path(p.file).filename().string(), &p.report, p.tools,
                         {"X", "Y", "Z", run.machine.rotary[0].name, run.machine.rotary[1].name}, !p.cl_data});
-  return verify_view(run.design.mesh(), run.part_mm, run.options.gouge_tolerance_mm, programs);
+  return verify_view(run.design.mesh(), run.part_mm, run.options.gouge_tolerance_mm, programs, &run.machine);
 }
 }  // namespace
 

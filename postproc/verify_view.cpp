@@ -23,8 +23,9 @@ size_t tool_index(const std::vector<VerifyTool>& tools, int number) {
 }  // namespace
 
 ViewerScene verify_view(const TriMesh& surface_mm, const TriMesh& part_mm, double tolerance_mm,
-                        const std::vector<VerifyViewProgram>& programs) {
+                        const std::vector<VerifyViewProgram>& programs, const Machine* machine) {
   ViewerScene v;
+  std::vector<double> tool_length_mm;  // per patch
   v.tolerance_mm = tolerance_mm;
   v.surface_mm = surface_mm;
   v.part_mm = part_mm;
@@ -48,6 +49,7 @@ ViewerScene verify_view(const TriMesh& surface_mm, const TriMesh& part_mm, doubl
         vp.meridian = t.assembly.cutter;
         vp.assembly = t.assembly;
         v.patches.push_back(std::move(vp));
+        tool_length_mm.push_back(t.length_mm);
       }
       return it->second;
     };
@@ -72,6 +74,7 @@ ViewerScene verify_view(const TriMesh& surface_mm, const TriMesh& part_mm, doubl
     if (r.design.deviation_mm.size() == surface_mm.vertices.size()) v.colourings.push_back({p.name, r.design.deviation_mm});
   }
   if (whole_run) v.tracks.push_back(std::move(all));
+  if (machine) v.machine = ViewerMachine{*machine, tool_length_mm};
 
   for (size_t k = 0; k < programs.size(); ++k) {
     const VerifyViewProgram& p = programs[k];

@@ -51,6 +51,8 @@ std::string ViewerScene::validate() const {
                              tracks[t].frames.size(), tracks[t].name);
     }
   }
+  if (machine && machine->tool_length_mm.size() != patches.size())
+    return fmt::format("machine: {} tool lengths for {} patches", machine->tool_length_mm.size(), patches.size());
   for (const ViewerColouring& c : colourings)
     if (c.deviation_mm.size() != surface_mm.vertices.size())
       return fmt::format("colouring '{}': {} deviations for {} surface vertices", c.name, c.deviation_mm.size(),
@@ -242,6 +244,24 @@ std::vector<size_t> kept_frames(size_t n, int max_frames, const std::set<size_t>
   return {all.begin(), all.end()};
 }
 
+std::string vec_json(const Eigen::Vector3d& v) { return fmt::format("[{},{},{}]", num(v.x()), num(v.y()), num(v.z())); }
+
+// The chain as kinematics/kinematics.cpp applies it: rotary[0] outermost, tables about points in
+// part coordinates, heads about points relative to the head pivot (gauge length above the nose).
+std::string machine_json(const ViewerMachine& vm) {
+  const Machine& m = vm.machine;
+  std::string j = fmt::format(R"({{"name":{},"kind":{},"rotary":[)", jstr(m.name), jstr(m.kind()));
+  for (size_t k = 0; k < 2; ++k) {
+    const RotaryAxis& a = m.rotary[k];
+    j += fmt::format(R"({}{{"name":{},"table":{},"direction":{},"pivot":{}}})", k ? "," : "", jstr(a.name),
+                     a.carries == Carrier::Table ? "true" : "false", vec_json(a.direction), vec_json(a.pivot));
+  }
+  j += fmt::format(R"(],"spindle":{},"gauge_length_mm":{},"tool_length_mm":[)", vec_json(m.spindle_direction),
+                   num(m.gauge_length_mm));
+  for (size_t k = 0; k < vm.tool_length_mm.size(); ++k) j += (k ? "," : "") + num(vm.tool_length_mm[k]);
+  return j + "]}";
+}
+
 std::string check(const ViewerScene& scene, const ViewerOptions& options) {
   if (std::string e = options.validate(); !e.empty()) return "viewer options: " + e;
   if (std::string e = scene.validate(); !e.empty()) return "viewer scene: " + e;
@@ -273,6 +293,7 @@ std::string viewer_json(const ViewerScene& scene, const ViewerOptions& options) 
     j += fmt::format("{}{{\"name\":{},\"bands\":\"{}\"}}", k ? "," : "", jstr(scene.colourings[k].name),
                      bands_b64(merge_deviation(scene.colourings[k].deviation_mm, surface.vertex_map, nv), tol));
   j += "]";
+  j += ",\n\"machine\":" + (scene.machine ? machine_json(*scene.machine) : std::string("null"));
   j += ",\n\"part\":";
   j += scene.part_mm.faces.empty() ? "null"
                                    : mesh_json(decimate(scene.part_mm, options.max_part_triangles).mesh, scene.part_mm.faces.size());
@@ -406,7 +427,11 @@ std::string viewer_html(const ViewerScene& scene, const ViewerOptions& options) 
       std::string(ruled ? "<label><input type=\"checkbox\" id=\"fcv-show-ruled\" checked> ruled surfaces</label> " : "") +
       "<label><input type=\"checkbox\" id=\"fcv-show-path\" checked> tool path</label>"
       " <label><input type=\"checkbox\" id=\"fcv-show-part\" checked> part</label>"
-      " <label><input type=\"checkbox\" id=\"fcv-show-tool\" checked> tool</label></div>\n"
+      " <label><input type=\"checkbox\" id=\"fcv-show-tool\" checked> tool</label>" +
+      std::string(scene.machine ? " <label><input type=\"checkbox\" id=\"fcv-machine\"> machine moving (tables turn, "
+                                  "heads tilt)</label>"
+                                : "") +
+      "</div>\n"
       "<div id=\"fcv-readout\"></div>\n<div id=\"fcv-markers\"></div>\n";
   if (!viewer_available()) {
     return h +

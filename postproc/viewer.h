@@ -11,12 +11,14 @@
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/collision.h"
 #include "core/mesh.h"
 #include "core/pose.h"
+#include "kinematics/machine.h"
 #include "postproc/nc_program.h"
 
 namespace flankcam {
@@ -66,6 +68,14 @@ struct ViewerColouring {
   std::vector<double> deviation_mm;  // per design-surface vertex, NaN where not reached
 };
 
+// The machine for the view's machine mode: the tables turn the part and the heads tilt the tool by
+// the rotary values of a track's frames, through the machine's chain (kinematics/kinematics.h),
+// drawn as simple bodies (a rotary table, a trunnion cradle, head housings).
+struct ViewerMachine {
+  Machine machine;
+  std::vector<double> tool_length_mm;  // per patch: spindle nose to tip as the program is posted
+};
+
 struct ViewerScene {
   double tolerance_mm = 0.01;
   std::string combined_name = "all patches";  // the surface coloured by the smallest deviation of all
@@ -74,6 +84,7 @@ struct ViewerScene {
   std::vector<ViewerPatch> patches;
   std::vector<ViewerTrack> tracks;
   std::vector<ViewerColouring> colourings;
+  std::optional<ViewerMachine> machine;  // none: no machine mode
   std::string validate() const;  // empty when valid: sizes agree, indices in range
 };
 

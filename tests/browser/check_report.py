@@ -13,7 +13,8 @@ verify.html (the same viewer over what `flankcam verify` simulated): `flankcam v
 programs (one dialect, each program and the whole run); the same two states (ready, no console
 message, deviation bands on the canvas, the slider moves the tool, the readout names the program
 line); then a copy of a program with one cutting block moved 1 mm sideways into the blade (exit 4):
-its marker is labelled with that line and #marker=0 jumps to the hit's deepest simulated position.
+its marker is labelled with that line and #marker=0 jumps to the hit's deepest simulated position;
+the machine mode (#machine=1) turns the tables and puts the tip where the program's joints say.
 Without a browser it exits 77 (CTest: skipped) unless FLANKCAM_REQUIRE_BROWSER=1, then it fails.
 --save PATH keeps the second screenshot (the README's picture: examples/conical-tool/report-view.png);
 --save-verify PATH the marker jump of verify.html (examples/conical-tool/verify-view.png).
@@ -214,7 +215,44 @@ def check_verify(browser, a, work, run_dir):
     print(f"verify.html readout: {readout.group(1) if readout else None!r}")
     if not readout or not re.search(r"\bline \d+\b.*programmed X -?\d", readout.group(1)):
         failures.append(f"verify.html's readout names no program line and axis values: {readout.group(1) if readout else None!r}")
+    failures += check_machine(browser, page, data, work, moved)
     return failures + check_verify_collision(browser, a, work, programs[0])
+
+
+def check_machine(browser, page, data, work, part_frame):
+    """Machine mode (#machine=1) at the same pose as `part_frame` (the whole-run slider state): the
+    tables turn the part, the picture changes, the bands stay on the canvas; on a table-table machine
+    programmed with joint values (the conical-tool job's xyzac-trt) the tool tip the view computes
+    through the machine's chain is where the program's X Y Z put it."""
+    if not data.get("machine"):
+        return ["verify.html has no machine for its machine mode"]
+    track = len(data["tracks"]) - 1
+    rapid = base64.b64decode(data["tracks"][track]["rapid"])
+    half = len(rapid) // 2
+    pose = min((i for i in range(len(rapid)) if not rapid[i]), key=lambda i: abs(i - half), default=half)
+    fragment = f"#view=only&track={track}&pose={pose}&machine=1"
+    failures = []
+    _, canvas = check_state(browser, page, fragment, os.path.join(work, "verify-machine.png"), failures)
+    changed = sum(1 for r0, r1 in zip(part_frame, canvas) for p0, p1 in zip(r0, r1) if p0 != p1)
+    print(f"{fragment}: pixels changed by the machine mode: {changed}")
+    if changed < 1000:
+        failures.append(f"the machine mode changed only {changed} pixels")
+    dom, _ = browser.dom("file://" + page + fragment)
+    readout = re.search(r'<div id="fcv-readout">([^<]*)</div>', dom)
+    text = readout.group(1) if readout else ""
+    print(f"{fragment}: readout {text!r}")
+    programmed = re.search(r"programmed X (-?[0-9.]+)  Y (-?[0-9.]+)  Z (-?[0-9.]+)", text)
+    machine_tip = re.search(r"machine frame tip (-?[0-9.]+), (-?[0-9.]+), (-?[0-9.]+) mm", text)
+    if not programmed or not machine_tip:
+        return failures + [f"{fragment}: the readout has no programmed X Y Z or no machine frame tip: {text!r}"]
+    if all(r["table"] for r in data["machine"]["rotary"]):
+        xyz = [float(v) for v in programmed.groups()]
+        tip = [float(v) for v in machine_tip.groups()]
+        worst = max(abs(p - q) for p, q in zip(xyz, tip))
+        print(f"{fragment}: machine tip {tip} vs programmed X Y Z {xyz}: {worst:.4f} mm apart")
+        if worst > 0.01:
+            failures.append(f"{fragment}: the machine frame tip {tip} is not the programmed X Y Z {xyz}")
+    return failures
 
 
 def check_verify_collision(browser, a, work, program):

@@ -508,6 +508,25 @@ TEST_CASE("verify view: an NC program's frames carry the programmed axis values,
     }
   }
   CHECK(ends == 3);
+  // The machine mode's chain: the machine file's axes in chain order and each patch's tool length.
+  const ViewerScene sm = verify_view(wall, {}, 0.01, {{"p.ngc", &rep, {tool}, {"X", "Y", "Z", "A", "C"}, true}}, &m);
+  const nlohmann::json jm = nlohmann::json::parse(viewer_json(sm));
+  REQUIRE(jm["machine"].is_object());
+  CHECK(jm["machine"]["name"] == "xyzac-trt");
+  for (size_t k = 0; k < 2; ++k) {
+    CAPTURE(k);
+    CHECK(jm["machine"]["rotary"][k]["name"] == m.rotary[k].name);
+    CHECK(jm["machine"]["rotary"][k]["table"] == (m.rotary[k].carries == Carrier::Table));
+    for (int c = 0; c < 3; ++c) {
+      CHECK(jm["machine"]["rotary"][k]["pivot"][size_t(c)].get<double>() == doctest::Approx(m.rotary[k].pivot[c]));
+      CHECK(jm["machine"]["rotary"][k]["direction"][size_t(c)].get<double>() == doctest::Approx(m.rotary[k].direction[c]));
+    }
+  }
+  CHECK(jm["machine"]["tool_length_mm"] == nlohmann::json::array({80.0}));
+  CHECK(j["machine"].is_null());
+  ViewerScene bad = sm;
+  bad.machine->tool_length_mm.push_back(50);
+  CHECK_THROWS_WITH_AS(viewer_json(bad), doctest::Contains("2 tool lengths for 1 patches"), InputError);
 }
 
 TEST_CASE("verify view refuses a marker that jumps outside its track") {
