@@ -69,6 +69,7 @@ std::string ViewerOptions::validate() const {
   if (max_part_triangles < 100) return "max_part_triangles: must be >= 100";
   if (max_envelope_triangles < 100) return "max_envelope_triangles: must be >= 100";
   if (max_frames < 2) return "max_frames: must be >= 2";
+  if (max_total_frames < 2) return "max_total_frames: must be >= 2";
   return {};
 }
 
@@ -304,9 +305,14 @@ std::string viewer_json(const ViewerScene& scene, const ViewerOptions& options) 
     for (const ViewerMarker& m : p.markers)
       for (size_t t = 0; t < m.frames.size(); ++t)
         if (m.frames[t] >= 0) must[t].insert(size_t(m.frames[t]));
+  size_t total = 0;
+  for (const ViewerTrack& t : scene.tracks) total += t.frames.size();
   std::vector<std::vector<size_t>> kept;
-  for (size_t t = 0; t < scene.tracks.size(); ++t)
-    kept.push_back(kept_frames(scene.tracks[t].frames.size(), options.max_frames, must[t]));
+  for (size_t t = 0; t < scene.tracks.size(); ++t) {
+    const size_t n = scene.tracks[t].frames.size();
+    const double share = total > size_t(options.max_total_frames) ? double(n) * options.max_total_frames / double(total) : double(n);
+    kept.push_back(kept_frames(n, std::max(2, std::min(options.max_frames, int(share))), must[t]));
+  }
 
   j += ",\n\"patches\":[";
   for (size_t k = 0; k < scene.patches.size(); ++k) {

@@ -93,6 +93,7 @@ struct ViewerOptions {
   int max_part_triangles = 150000;
   int max_envelope_triangles = 60000;   // per patch
   int max_frames = 20000;               // per track; longer tracks are subsampled (ends and marker frames kept)
+  int max_total_frames = 60000;         // all tracks together (~4 MB): beyond it each track's share shrinks in proportion
   std::string validate() const;
 };
 

@@ -434,7 +434,7 @@ TEST_CASE("verify view: a gouge is a marker labelled with its program line that 
   const ViewerScene s = verify_view(wall, {}, 0.01, programs);
   REQUIRE(s.tracks.size() == 3);  // each program and the whole run
   CHECK(s.tracks[2].frames.size() == size_t(a.positions + b.positions));
-  for (const ViewerOptions& vo : {ViewerOptions{}, ViewerOptions{100, 100, 100, 40}}) {  // whole and subsampled
+  for (const ViewerOptions& vo : {ViewerOptions{}, ViewerOptions{100, 100, 100, 40, 100}}) {  // whole and subsampled
     CAPTURE(vo.max_frames);
     const nlohmann::json j = nlohmann::json::parse(viewer_json(s, vo));
     REQUIRE(j["patches"].size() == 2);
@@ -538,4 +538,51 @@ TEST_CASE("verify view refuses a marker that jumps outside its track") {
   s.patches[0].markers[0].frames = {-1};
   s.patches[0].markers[0].pose = 99;  // unused once the frames are given
   CHECK_NOTHROW((void)viewer_json(s));
+}
+
+TEST_CASE("verify view of a 200k-triangle surface and part with eight long programs: a page under 20 MB, the hits' frames kept") {
+  const TriMesh surface = test::wavy_grid(317, 317, 200, 200, 10), part = test::wavy_grid(317, 317, 200, 200, 30);
+  REQUIRE(surface.faces.size() > 199000);
+  // Eight programs of 30000 simulated positions each, as verify reports them (no simulation here).
+  std::mt19937 rng;
+  std::uniform_real_distribution<double> u(-0.05, 0.05);
+  std::vector<VerifyReport> reports(8);
+  std::vector<VerifyViewProgram> programs;
+  for (size_t k = 0; k < reports.size(); ++k) {
+    VerifyReport& r = reports[k];
+    for (int b = 0; b < 300; ++b) r.blocks.push_back({b, 10 + b, b % 50 == 0, 1, {}, 0.01});
+    for (int i = 0; i < 30000; ++i) {
+      const double s = i / 30000.0;
+      r.motion.push_back({{Eigen::Vector3d(200 * s - 100, 10.0 * k, 5), Eigen::Vector3d::UnitZ()}, {}, i / 100});
+    }
+    r.positions = long(r.motion.size());
+    r.hits.push_back({});
+    r.hits.back().position = 12345 + int(k), r.hits.back().line = 10 + (12345 + int(k)) / 100;
+    r.design.deviation_mm.resize(surface.vertices.size());
+    for (double& d : r.design.deviation_mm) d = u(rng);
+    programs.push_back({"p" + std::to_string(k) + ".nc", &r, {cone_tool()}, {"X", "Y", "Z", "B", "C"}, true});
+  }
+  const ViewerScene s = verify_view(surface, part, 0.01, programs);
+  REQUIRE(s.tracks.size() == 9);
+  const ViewerOptions o;
+  const std::string page = viewer_html(s, o);
+  MESSAGE("verify page of a 200k-triangle surface and part, 8 programs of 30000 positions: ", page.size() / 1e6, " MB");
+  CHECK(page.size() < 20'000'000);
+  const nlohmann::json j = nlohmann::json::parse(viewer_json(s, o));
+  long frames = 0;
+  for (const auto& t : j["tracks"]) frames += t["frames"].get<long>();
+  CHECK(frames <= o.max_total_frames + 2 * 8);  // the shares, and each hit's frame in its track and the whole run
+  CHECK(j["tracks"][8]["original_frames"] == 240000);
+  for (size_t k = 0; k < reports.size(); ++k) {
+    CAPTURE(k);
+    const auto& m = j["patches"][k]["markers"][0];
+    CHECK(m["label"].get<std::string>().rfind("p" + std::to_string(k) + ".nc line " + std::to_string(reports[k].hits[0].line) + ":", 0) == 0);
+    for (size_t t : {k, size_t(8)}) {
+      const int f = m["frames"][t];
+      REQUIRE(f >= 0);
+      const std::vector<float> tip = floats(j["tracks"][t]["tip"]);
+      CHECK(tip[3 * size_t(f)] == doctest::Approx(reports[k].motion[size_t(reports[k].hits[0].position)].pose.tip.x()));
+      CHECK(tip[3 * size_t(f) + 1] == doctest::Approx(10.0 * k));
+    }
+  }
 }
