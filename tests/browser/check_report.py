@@ -259,7 +259,7 @@ def check_verify_collision(browser, a, work, program):
     """A copy of `program` with the 20th feed block after the first G1 moved 1 mm along X (one side
     cuts into the blade): exit 4, a marker per hit labelled with its line, #marker=0 jumps there."""
     lines = open(program, encoding="utf-8").read().split("\n")
-    g1 = next((i for i, l in enumerate(lines) if re.match(r"(N\d+ )?G0?1 ", l)), None)
+    g1 = next((i for i, l in enumerate(lines) if re.search(r"(^|\s)G0?1\s", l)), None)
     if g1 is None or g1 + 20 >= len(lines) or not re.search(r"X-?[0-9]", lines[g1 + 20]):
         return [f"{program}: no feed block with X 20 lines after the first G1 to move"]
     index = g1 + 20
