@@ -105,7 +105,7 @@ ViewerScene viewer_scene(const Job& job, const FittedJob& fitted, const std::vec
     for (auto& x : vp.envelope_mm.vertices) x = fitted.frame.to_mm(x);
     const std::vector<std::string> labels = collision_summary(p);
     for (size_t i = 0; i < p.collisions.intervals.size(); ++i)
-      vp.markers.push_back({p.collisions.intervals[i].at, p.collisions.intervals[i].worst_pose, labels.at(i)});
+      vp.markers.push_back({p.collisions.intervals[i].at, p.collisions.intervals[i].worst_pose, labels.at(i), {}});
     names.push_back(vp.name);
     v.patches.push_back(std::move(vp));
   }
@@ -117,7 +117,7 @@ ViewerScene viewer_scene(const Job& job, const FittedJob& fitted, const std::vec
   for (size_t k = 0; k < fitted.patches.size(); ++k)  // patches without a program: their fitted poses
     if (std::none_of(programs.begin(), programs.end(), [&](const PostedProgram& w) { return w.patch == names[k]; })) {
       ViewerTrack t{names[k] + " (fitted poses, no program)", {"X", "Y", "Z", rotary[0], rotary[1]}, false, {}};
-      for (const ToolPose& q : fitted.patches[k].poses) t.frames.push_back({q, {}, false, int(k)});
+      for (const ToolPose& q : fitted.patches[k].poses) t.frames.push_back({q, {}, false, int(k), 0});
       v.tracks.push_back(std::move(t));
     }
   return v;

@@ -20,6 +20,8 @@
 #include "pipeline/run.h"
 #include "postproc/report_html.h"
 #include "postproc/report_svg.h"
+#include "postproc/verify_view.h"
+#include "postproc/viewer.h"
 
 namespace flankcam::pipeline {
 
@@ -48,6 +50,15 @@ nlohmann::ordered_json round3(const Eigen::Vector3d& p) {
   return {std::round(p.x() * 1e4) / 1e4, std::round(p.y() * 1e4) / 1e4, std::round(p.z() * 1e4) / 1e4};
 }
 double r4(double x) { return std::isfinite(x) ? std::round(x * 1e4) / 1e4 : x; }
+
+// verify.html's 3D view: every program's simulated motion in the work frame, where verify ran.
+ViewerScene verify_page_view(const VerifyRun& run) {
+  std::vector<VerifyViewProgram> programs;
+  for (const VerifiedProgram& p : run.programs)
+    programs.push_back({fs::path(p.file).filename().string(), &p.report, p.tools,
+                        {"X", "Y", "Z", run.machine.rotary[0].name, run.machine.rotary[1].name}, !p.cl_data});
+  return verify_view(run.design.mesh(), run.part_mm, run.options.gouge_tolerance_mm, programs, &run.machine);
+}
 }  // namespace
 
 double VerifiedProgram::min_rapid_all_mm() const {
@@ -100,7 +111,7 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
   if (std::optional<LoadedMesh> part = load_job_part(job)) separate.emplace(to_work(job.post, std::move(part->mesh)));
   VerifyOptions vo;
   vo.gouge_tolerance_mm = job.tolerance_mm;
-  VerifyRun run{std::move(job), std::move(m), vo, std::move(design), {}};
+  VerifyRun run{std::move(job), std::move(m), vo, std::move(design), separate ? separate->mesh() : TriMesh{}, {}};
   const Job& j = run.job;
   const SurfaceIndex& part = separate ? *separate : run.design;
 
@@ -137,6 +148,8 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
         vt = tool_for(cl.tool, path.stem().string());
       }
       r.meridian = vt.assembly.cutter;
+      r.tools = {vt};
+      r.cl_data = true;
       r.report = verify_cl(cl, part, vt, run.options, &run.design);
     } else {
       std::vector<VerifyTool> tools;
@@ -144,6 +157,7 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
       if (names.empty()) tools.push_back(tool_for(0, path.stem().string()));
       for (const auto& [number, name] : names) tools.push_back(tool_for(number, name));
       r.meridian = tools.front().assembly.cutter;
+      r.tools = tools;
       r.report = verify_text(text, dialect_of_file(file), file, run.machine, part, tools, run.options, &run.design);
     }
     r.min_rapid_mm = r.min_feed_mm = {INFINITY, INFINITY, INFINITY};
@@ -244,6 +258,7 @@ void write_verify(const VerifyRun& run, OutputDir& out) {
                                          160, markers));
     html.sections.push_back(std::move(sec));
   }
+  html.viewer = viewer_html(verify_page_view(run));
   write_file_atomically(out.file("verify.json"), [&](std::ostream& o) { o << report.dump(1) << "\n"; });
   write_file_atomically(out.file("verify.html"), [&](std::ostream& o) { o << report_html(html); });
   out.commit();

@@ -30,6 +30,8 @@ struct VerifiedProgram {
   std::string file;
   VerifyReport report;
   std::vector<Eigen::Vector2d> meridian;             // the (first) tool's cutter, mm
+  std::vector<VerifyTool> tools;                     // as simulated (verify.html's 3D view draws them)
+  bool cl_data = false;                              // APT CL-data: poses only, no machine axes
   std::array<double, 3> min_rapid_mm{}, min_feed_mm{};  // cutter, shank, holder clearance; +inf without blocks
   [[nodiscard]] double min_rapid_all_mm() const;
 };
@@ -40,6 +42,7 @@ struct VerifyRun {
   Machine machine;
   VerifyOptions options;
   SurfaceIndex design;  // the job's surface in the work frame (the coverage and the deviation map)
+  TriMesh part_mm;      // the job's separate part in the work frame; empty: the surface is the part
   std::vector<VerifiedProgram> programs;  // in the order requested
   [[nodiscard]] int failing() const;      // programs that collide or gouge (not clean)
 };
@@ -51,7 +54,7 @@ struct VerifyRun {
 // back-simulates each program. Throws InputError on bad input. `progress`: one line per program.
 [[nodiscard]] VerifyRun verify(const VerifyRequest& request, const Progress& progress = [](const std::string&) {});
 
-// verify.json and verify.html. Commits `out`.
+// verify.json and verify.html (with the 3D view of the simulation, postproc/verify_view.h). Commits `out`.
 void write_verify(const VerifyRun& run, OutputDir& out);
 
 }  // namespace flankcam::pipeline

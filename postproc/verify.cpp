@@ -144,6 +144,7 @@ struct SimBlock {
   bool rapid = false;
   const VerifyTool* vt = nullptr;
   std::vector<ToolPose> positions;  // the block's end included, its start (the previous end) not
+  std::vector<Joints> programmed;   // per position: the axis values as programmed (NC programs only)
   double minutes = 0;
 };
 
@@ -186,6 +187,7 @@ void sweep(const SurfaceIndex& part, const std::vector<SimBlock>& blocks, const 
           h.block = sb.block, h.line = sb.line, h.rapid = sb.rapid, h.component = comp;
           h.depth_mm = -g;
           h.point = f.point;
+          h.position = int(rep.positions - 1);
         }
       }
     }
@@ -232,6 +234,15 @@ Deviation design_deviation(const SurfaceIndex& design, const std::vector<SimBloc
     dev.within += std::abs(best[v]) <= tol_mm;
   }
   return dev;
+}
+
+// The positions as swept, in order, for the 3D view.
+std::vector<VerifiedPosition> motion_of(const std::vector<SimBlock>& blocks) {
+  std::vector<VerifiedPosition> out;
+  for (size_t b = 0; b < blocks.size(); ++b)
+    for (size_t k = 0; k < blocks[b].positions.size(); ++k)
+      out.push_back({blocks[b].positions[k], k < blocks[b].programmed.size() ? blocks[b].programmed[k] : Joints{}, int(b)});
+  return out;
 }
 
 const VerifyTool& tool_for(const std::vector<VerifyTool>& tools, int number) {
@@ -308,15 +319,19 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
     sb.vt = &tool_for(tools, pt.tool);
     const double L = sb.vt->length_mm;
     const bool tcp = tcp_of(pt);
-    const auto at = [&](double f) {
+    const auto programmed = [&](double f) {
       Joints q;
       q.linear = (1 - f) * prev.at.linear + f * pt.at.linear;
       for (size_t k = 0; k < 2; ++k) q.rotary[k] = (1 - f) * prev.at.rotary[k] + f * pt.at.rotary[k];
+      return q;
+    };
+    const auto at = [&](double f) {
+      const Joints q = programmed(f);
       const ToolPose fk = forward(m, q, L);
       return tcp ? ToolPose{q.linear, fk.axis} : fk;
     };
     const int n = i == 0 ? 1 : steps_for(at, sb.vt->assembly.total_length(), o.step_mm);
-    for (int s = 1; s <= n; ++s) sb.positions.push_back(at(double(s) / n));
+    for (int s = 1; s <= n; ++s) sb.positions.push_back(at(double(s) / n)), sb.programmed.push_back(programmed(double(s) / n));
     // Machine joints at both ends (under TCP the controller computes the linear joints).
     const auto joints = [&](const NcPoint& p) {
       if (!tcp_of(p)) return p.at;
@@ -343,6 +358,7 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
     blocks.push_back(std::move(sb));
   }
   sweep(part, blocks, o, rep);
+  rep.motion = motion_of(blocks);
   if (design) rep.design = design_deviation(*design, blocks, o.gouge_tolerance_mm);
   return rep;
 }
@@ -371,6 +387,7 @@ VerifyReport verify_cl(const ClProgram& cl, const SurfaceIndex& part, const Veri
     blocks.push_back(std::move(sb));
   }
   sweep(part, blocks, o, rep);
+  rep.motion = motion_of(blocks);
   if (design) rep.design = design_deviation(*design, blocks, o.gouge_tolerance_mm);
   return rep;
 }

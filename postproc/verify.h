@@ -53,6 +53,7 @@ struct VerifyHit {
   Component component = Component::Tool;
   double depth_mm = 0;                            // how far inside the part (beyond nothing: raw depth)
   Eigen::Vector3d point = Eigen::Vector3d::Zero();  // the part point there (program frame)
+  int position = -1;                                // the deepest position: index into VerifyReport::motion
   [[nodiscard]] std::string kind() const;          // "gouge" (the cutter in a feed block) or "collision"
 };
 
@@ -70,12 +71,20 @@ struct Deviation {  // the machined design surface Φ (when one is given)
   [[nodiscard]] double coverage() const { return reached > 0 ? double(within) / reached : 0; }
 };
 
+// One simulated position, kept for the 3D view's playback (postproc/verify_view.h).
+struct VerifiedPosition {
+  ToolPose pose;      // program frame
+  Joints programmed;  // X Y Z (mm) and the rotaries (deg) as the program states them, interpolated; CL-data: zero
+  int block = 0;      // index into VerifyReport::blocks
+};
+
 struct VerifyReport {
   std::vector<VerifiedBlock> blocks;
   std::vector<VerifyHit> hits;            // worst per block and component
   std::vector<AxisViolation> violations;  // travel limits and speeds
   double cycle_minutes = 0, cut_minutes = 0;
   long positions = 0;                     // simulated positions
+  std::vector<VerifiedPosition> motion;   // each of them, in order
   Deviation design;                       // empty unless a design surface was given
   [[nodiscard]] bool clean() const { return hits.empty(); }
   // "LINE N (block B): holder collision 1.234 mm at (x, y, z), rapid" for the deepest hit, or "".

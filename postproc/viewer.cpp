@@ -34,15 +34,29 @@ std::string ViewerScene::validate() const {
   if (!mesh_ok(surface_mm)) return "surface: face index out of range";
   if (!mesh_ok(part_mm)) return "part: face index out of range";
   for (const ViewerPatch& p : patches) {
-    if (p.design_deviation_mm.size() != surface_mm.vertices.size())
+    if (!p.design_deviation_mm.empty() && p.design_deviation_mm.size() != surface_mm.vertices.size())
       return fmt::format("patch '{}': {} deviations for {} surface vertices", p.name, p.design_deviation_mm.size(),
                          surface_mm.vertices.size());
     if (p.meridian.size() < 2) return fmt::format("patch '{}': meridian needs two points", p.name);
     if (!mesh_ok(p.envelope_mm)) return fmt::format("patch '{}': envelope face index out of range", p.name);
-    for (const ViewerMarker& m : p.markers)
-      if (m.pose < 0 || size_t(m.pose) >= p.poses.size())
+    for (const ViewerMarker& m : p.markers) {
+      if (m.frames.empty() && (m.pose < 0 || size_t(m.pose) >= p.poses.size()))
         return fmt::format("patch '{}': marker pose {} of {}", p.name, m.pose, p.poses.size());
+      if (!m.frames.empty() && m.frames.size() != tracks.size())
+        return fmt::format("patch '{}': marker '{}' has frames for {} of {} tracks", p.name, m.label, m.frames.size(),
+                           tracks.size());
+      for (size_t t = 0; t < m.frames.size(); ++t)
+        if (m.frames[t] < -1 || (m.frames[t] >= 0 && size_t(m.frames[t]) >= tracks[t].frames.size()))
+          return fmt::format("patch '{}': marker '{}' frame {} of {} in track '{}'", p.name, m.label, m.frames[t],
+                             tracks[t].frames.size(), tracks[t].name);
+    }
   }
+  if (machine && machine->tool_length_mm.size() != patches.size())
+    return fmt::format("machine: {} tool lengths for {} patches", machine->tool_length_mm.size(), patches.size());
+  for (const ViewerColouring& c : colourings)
+    if (c.deviation_mm.size() != surface_mm.vertices.size())
+      return fmt::format("colouring '{}': {} deviations for {} surface vertices", c.name, c.deviation_mm.size(),
+                         surface_mm.vertices.size());
   for (const ViewerTrack& t : tracks)
     for (const ViewerFrame& f : t.frames)
       if (f.patch < 0 || size_t(f.patch) >= patches.size())
@@ -55,6 +69,7 @@ std::string ViewerOptions::validate() const {
   if (max_part_triangles < 100) return "max_part_triangles: must be >= 100";
   if (max_envelope_triangles < 100) return "max_envelope_triangles: must be >= 100";
   if (max_frames < 2) return "max_frames: must be >= 2";
+  if (max_total_frames < 2) return "max_total_frames: must be >= 2";
   return {};
 }
 
@@ -205,6 +220,7 @@ std::vector<double> merge_deviation(const std::vector<double>& dev, const std::v
 }
 
 std::string bands_b64(const std::vector<double>& dev, double tol) {
+  if (dev.empty()) return {};
   std::vector<std::uint8_t> b;
   b.reserve(dev.size());
   for (double x : dev) b.push_back(std::uint8_t(deviation_band(x, tol)));
@@ -217,15 +233,34 @@ std::string meridian_json(const std::vector<Eigen::Vector2d>& zr) {
   return s + "]";
 }
 
-// Tracks subsampled to `max_frames`, both ends kept.
-std::vector<size_t> kept_frames(size_t n, int max_frames) {
+// Tracks subsampled to `max_frames`, both ends and the frames markers jump to (`must`) kept. Sorted.
+std::vector<size_t> kept_frames(size_t n, int max_frames, const std::set<size_t>& must) {
   std::vector<size_t> k;
   if (n <= size_t(max_frames)) {
     for (size_t i = 0; i < n; ++i) k.push_back(i);
     return k;
   }
-  for (int i = 0; i < max_frames; ++i) k.push_back(size_t(std::llround(double(i) * double(n - 1) / (max_frames - 1))));
-  return k;
+  std::set<size_t> all = must;
+  for (int i = 0; i < max_frames; ++i) all.insert(size_t(std::llround(double(i) * double(n - 1) / (max_frames - 1))));
+  return {all.begin(), all.end()};
+}
+
+std::string vec_json(const Eigen::Vector3d& v) { return fmt::format("[{},{},{}]", num(v.x()), num(v.y()), num(v.z())); }
+
+// The chain as kinematics/kinematics.cpp applies it: rotary[0] outermost, tables about points in
+// part coordinates, heads about points relative to the head pivot (gauge length above the nose).
+std::string machine_json(const ViewerMachine& vm) {
+  const Machine& m = vm.machine;
+  std::string j = fmt::format(R"({{"name":{},"kind":{},"rotary":[)", jstr(m.name), jstr(m.kind()));
+  for (size_t k = 0; k < 2; ++k) {
+    const RotaryAxis& a = m.rotary[k];
+    j += fmt::format(R"({}{{"name":{},"table":{},"direction":{},"pivot":{}}})", k ? "," : "", jstr(a.name),
+                     a.carries == Carrier::Table ? "true" : "false", vec_json(a.direction), vec_json(a.pivot));
+  }
+  j += fmt::format(R"(],"spindle":{},"gauge_length_mm":{},"tool_length_mm":[)", vec_json(m.spindle_direction),
+                   num(m.gauge_length_mm));
+  for (size_t k = 0; k < vm.tool_length_mm.size(); ++k) j += (k ? "," : "") + num(vm.tool_length_mm[k]);
+  return j + "]}";
 }
 
 std::string check(const ViewerScene& scene, const ViewerOptions& options) {
@@ -244,19 +279,40 @@ std::string viewer_json(const ViewerScene& scene, const ViewerOptions& options) 
 
   std::string j = fmt::format(R"({{"format":"flankcam-viewer 1","units":"mm","tolerance_mm":{},)", num(tol));
   j += "\n\"surface\":" + mesh_json(surface.mesh, scene.surface_mm.faces.size());
-  // Φ after all patches: each removes material up to its envelope, so the smallest deviation stays.
+  // Φ after all patches (programs): each removes material up to its envelope, the smallest deviation stays.
   std::vector<double> all(scene.surface_mm.vertices.size(), std::nan(""));
-  for (const ViewerPatch& p : scene.patches)
-    for (size_t i = 0; i < all.size(); ++i)
-      if (std::isfinite(p.design_deviation_mm[i]) && !(all[i] <= p.design_deviation_mm[i])) all[i] = p.design_deviation_mm[i];
+  const auto combine = [&](const std::vector<double>& dev) {
+    for (size_t i = 0; i < dev.size(); ++i)
+      if (std::isfinite(dev[i]) && !(all[i] <= dev[i])) all[i] = dev[i];
+  };
+  for (const ViewerPatch& p : scene.patches) combine(p.design_deviation_mm);
+  for (const ViewerColouring& c : scene.colourings) combine(c.deviation_mm);
+  j += ",\n\"combined\":" + jstr(scene.combined_name);
   j += ",\n\"bands\":\"" + bands_b64(merge_deviation(all, surface.vertex_map, nv), tol) + "\"";
+  j += ",\n\"colourings\":[";
+  for (size_t k = 0; k < scene.colourings.size(); ++k)
+    j += fmt::format("{}{{\"name\":{},\"bands\":\"{}\"}}", k ? "," : "", jstr(scene.colourings[k].name),
+                     bands_b64(merge_deviation(scene.colourings[k].deviation_mm, surface.vertex_map, nv), tol));
+  j += "]";
+  j += ",\n\"machine\":" + (scene.machine ? machine_json(*scene.machine) : std::string("null"));
   j += ",\n\"part\":";
   j += scene.part_mm.faces.empty() ? "null"
                                    : mesh_json(decimate(scene.part_mm, options.max_part_triangles).mesh, scene.part_mm.faces.size());
 
   // Tracks first (the markers point into them), each subsampled the same way it is written.
+  std::vector<std::set<size_t>> must(scene.tracks.size());
+  for (const ViewerPatch& p : scene.patches)
+    for (const ViewerMarker& m : p.markers)
+      for (size_t t = 0; t < m.frames.size(); ++t)
+        if (m.frames[t] >= 0) must[t].insert(size_t(m.frames[t]));
+  size_t total = 0;
+  for (const ViewerTrack& t : scene.tracks) total += t.frames.size();
   std::vector<std::vector<size_t>> kept;
-  for (const ViewerTrack& t : scene.tracks) kept.push_back(kept_frames(t.frames.size(), options.max_frames));
+  for (size_t t = 0; t < scene.tracks.size(); ++t) {
+    const size_t n = scene.tracks[t].frames.size();
+    const double share = total > size_t(options.max_total_frames) ? double(n) * options.max_total_frames / double(total) : double(n);
+    kept.push_back(kept_frames(n, std::max(2, std::min(options.max_frames, int(share))), must[t]));
+  }
 
   j += ",\n\"patches\":[";
   for (size_t k = 0; k < scene.patches.size(); ++k) {
@@ -277,19 +333,28 @@ std::string viewer_json(const ViewerScene& scene, const ViewerOptions& options) 
       const Eigen::Vector3d b = q.tip + L * q.axis;
       rails.insert(rails.end(), {q.tip.x(), q.tip.y(), q.tip.z(), b.x(), b.y(), b.z()});
     }
-    j += fmt::format("{}\n{{\"name\":{},\"cutter\":{},\"shank\":{},\"holder\":{},\"bands\":\"{}\",\"poses\":{},\"rails\":\"{}\",",
+    const std::string bands = p.design_deviation_mm.empty()
+                                  ? std::string("null")
+                                  : "\"" + bands_b64(merge_deviation(p.design_deviation_mm, surface.vertex_map, nv), tol) + "\"";
+    j += fmt::format("{}\n{{\"name\":{},\"cutter\":{},\"shank\":{},\"holder\":{},\"bands\":{},\"poses\":{},\"rails\":\"{}\",",
                      k ? "," : "", jstr(p.name), meridian_json(p.meridian), meridian_json(shank), meridian_json(holder),
-                     bands_b64(merge_deviation(p.design_deviation_mm, surface.vertex_map, nv), tol), p.poses.size(), f32(rails));
+                     bands, p.poses.size(), f32(rails));
     j += "\"envelope\":" +
          (p.envelope_mm.faces.empty() ? std::string("null")
                                       : mesh_json(decimate(p.envelope_mm, options.max_envelope_triangles).mesh, p.envelope_mm.faces.size()));
     j += ",\"markers\":[";
     for (size_t m = 0; m < p.markers.size(); ++m) {
       const ViewerMarker& mk = p.markers[m];
-      const ToolPose& worst = p.poses[size_t(mk.pose)];
-      // Where the marker jumps: per track, the frame of this patch nearest the worst pose (-1: none).
+      // Where the marker jumps: per track, its frame as kept, or the frame of this patch nearest
+      // the worst pose (-1: none).
       std::string frames;
       for (size_t t = 0; t < scene.tracks.size(); ++t) {
+        if (!mk.frames.empty()) {
+          const auto it = std::lower_bound(kept[t].begin(), kept[t].end(), size_t(std::max(mk.frames[t], 0)));
+          frames += fmt::format("{}{}", t ? "," : "", mk.frames[t] < 0 ? -1 : int(it - kept[t].begin()));
+          continue;
+        }
+        const ToolPose& worst = p.poses[size_t(mk.pose)];
         int best = -1;
         double best_d = 1e300;
         for (size_t i = 0; i < kept[t].size(); ++i) {
@@ -309,7 +374,7 @@ std::string viewer_json(const ViewerScene& scene, const ViewerOptions& options) 
   for (size_t t = 0; t < scene.tracks.size(); ++t) {
     const ViewerTrack& tr = scene.tracks[t];
     std::vector<double> tip, axis, values;
-    std::vector<std::uint8_t> rapid, patch;
+    std::vector<std::uint8_t> rapid, patch, line;
     for (size_t i : kept[t]) {
       const ViewerFrame& f = tr.frames[i];
       tip.insert(tip.end(), {f.pose.tip.x(), f.pose.tip.y(), f.pose.tip.z()});
@@ -317,14 +382,15 @@ std::string viewer_json(const ViewerScene& scene, const ViewerOptions& options) 
       values.insert(values.end(), f.values.begin(), f.values.end());
       rapid.push_back(f.rapid);
       put_u32(patch, std::uint32_t(f.patch));
+      put_u32(line, std::uint32_t(std::max(f.line, 0)));
     }
     std::string names;
     for (size_t a = 0; a < 5; ++a) names += (a ? "," : "") + jstr(tr.axis_names[a]);
     j += fmt::format(
         "{}\n{{\"name\":{},\"axes\":[{}],\"has_values\":{},\"frames\":{},\"original_frames\":{},\"tip\":\"{}\",\"axis\":\"{}\","
-        "\"values\":\"{}\",\"rapid\":\"{}\",\"patch\":\"{}\"}}",
+        "\"values\":\"{}\",\"rapid\":\"{}\",\"patch\":\"{}\",\"line\":\"{}\"}}",
         t ? "," : "", jstr(tr.name), names, tr.has_values ? "true" : "false", kept[t].size(), tr.frames.size(), f32(tip),
-        f32(axis), f32(values), base64(rapid), base64(patch));
+        f32(axis), f32(values), base64(rapid), base64(patch), base64(line));
   }
   return j + "]}\n";
 }
@@ -332,6 +398,9 @@ std::string viewer_json(const ViewerScene& scene, const ViewerOptions& options) 
 std::string viewer_html(const ViewerScene& scene, const ViewerOptions& options) {
   const std::string data = viewer_json(scene, options);
   const std::string tol = fmt::format("{}", scene.tolerance_mm);
+  // Legend entries and switches only for what the scene has (verify.html: no Ω, no fitted poses).
+  const bool envelopes = std::any_of(scene.patches.begin(), scene.patches.end(), [](const ViewerPatch& p) { return !p.envelope_mm.faces.empty(); });
+  const bool ruled = std::any_of(scene.patches.begin(), scene.patches.end(), [](const ViewerPatch& p) { return p.poses.size() >= 2; });
   std::string h =
       "<section id=\"flankcam-view\">\n<style>\n"
       "#fcv-canvas{width:100%;height:640px;display:block;border:1px solid #bbb;background:#f4f6f9}\n"
@@ -351,20 +420,24 @@ std::string viewer_html(const ViewerScene& scene, const ViewerOptions& options) 
       "<div><i style=\"background:#3caa50\"></i>within &#177;" + markup_escape(tol) + " mm</div>"
       "<div><i style=\"background:#d72828\"></i>undercut &gt; " + markup_escape(tol) + " mm (material left)</div>"
       "<div><i style=\"background:#2850d7\"></i>overcut &lt; &#8722;" + markup_escape(tol) + " mm</div>"
-      "<div><i style=\"background:#aaaaaa\"></i>not reached</div>"
-      "<div><i style=\"background:#d8b840\"></i>machined envelope &#937;</div>"
-      "<div><i style=\"background:#9a5cd0\"></i>axis ruled surface</div>"
+      "<div><i style=\"background:#aaaaaa\"></i>not reached</div>" +
+      std::string(envelopes ? "<div><i style=\"background:#d8b840\"></i>machined envelope &#937;</div>" : "") +
+      std::string(ruled ? "<div><i style=\"background:#9a5cd0\"></i>axis ruled surface</div>" : "") +
       "<div><i style=\"background:#ff2060;border-radius:50%\"></i>collision / gouge</div></div></div>\n"
       "<div class=\"fcv-controls\"><label>program <select id=\"fcv-track\"></select></label>"
       " <label>colour by <select id=\"fcv-colour\"></select></label>"
       " <button id=\"fcv-play\" type=\"button\">Play</button>"
       " <input id=\"fcv-slider\" type=\"range\" min=\"0\" max=\"0\" value=\"0\" step=\"1\">"
-      " <span id=\"fcv-frame\"></span><br>"
-      "<label><input type=\"checkbox\" id=\"fcv-show-envelope\" checked> envelopes</label>"
-      " <label><input type=\"checkbox\" id=\"fcv-show-ruled\" checked> ruled surfaces</label>"
-      " <label><input type=\"checkbox\" id=\"fcv-show-path\" checked> tool path</label>"
+      " <span id=\"fcv-frame\"></span><br>" +
+      std::string(envelopes ? "<label><input type=\"checkbox\" id=\"fcv-show-envelope\" checked> envelopes</label> " : "") +
+      std::string(ruled ? "<label><input type=\"checkbox\" id=\"fcv-show-ruled\" checked> ruled surfaces</label> " : "") +
+      "<label><input type=\"checkbox\" id=\"fcv-show-path\" checked> tool path</label>"
       " <label><input type=\"checkbox\" id=\"fcv-show-part\" checked> part</label>"
-      " <label><input type=\"checkbox\" id=\"fcv-show-tool\" checked> tool</label></div>\n"
+      " <label><input type=\"checkbox\" id=\"fcv-show-tool\" checked> tool</label>" +
+      std::string(scene.machine ? " <label><input type=\"checkbox\" id=\"fcv-machine\"> machine moving (tables turn, "
+                                  "heads tilt)</label>"
+                                : "") +
+      "</div>\n"
       "<div id=\"fcv-readout\"></div>\n<div id=\"fcv-markers\"></div>\n";
   if (!viewer_available()) {
     return h +

@@ -1,19 +1,24 @@
-// The interactive 3D view of report.html: the data it shows (design surface with its deviation
-// bands, the part, each patch's machined envelope Ω, the axis ruled surface, the tool assembly, the
-// posted motion with its programmed axis values, collision markers) and the HTML fragment that
-// draws it with three.js (Debian's libjs-three, inlined at build time: one offline file).
-// Meshes are decimated to a triangle budget and written as base64 little-endian Float32/Uint32
-// arrays with fixed-decimal JSON around them, so the same scene gives the same bytes.
+// The interactive 3D view of report.html and verify.html (one viewer, two pages): the data it shows
+// (design surface with its deviation bands, the part, each patch's machined envelope Ω, the axis
+// ruled surface, the tool assemblies, the motion of programs with their programmed axis values,
+// collision and gouge markers) and the HTML fragment that draws it with three.js (Debian's
+// libjs-three, inlined at build time: one offline file). report.html builds its scene from the fit
+// and the posted programs (pipeline/outputs.cpp), verify.html from the back-simulation
+// (postproc/verify_view.h). Meshes are decimated to a triangle budget and written as base64
+// little-endian Float32/Uint32 arrays with fixed-decimal JSON around them, so the same scene gives
+// the same bytes.
 #pragma once
 #include <Eigen/Core>
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "core/collision.h"
 #include "core/mesh.h"
 #include "core/pose.h"
+#include "kinematics/machine.h"
 #include "postproc/nc_program.h"
 
 namespace flankcam {
@@ -26,15 +31,18 @@ struct ViewerMarker {
   Eigen::Vector3d at_mm = Eigen::Vector3d::Zero();  // the part point of the collision or gouge
   int pose = 0;                                     // index into ViewerPatch::poses (the worst one)
   std::string label;                                // "holder collides at poses 12-17, 0.731 mm deep"
+  // Per track, the frame the marker jumps to (-1: not in that track). Empty: the frame of this
+  // patch nearest `pose` (report.html); verify.html knows the simulated position of each hit.
+  std::vector<int> frames;
 };
 
 struct ViewerPatch {
   std::string name;
   std::vector<Eigen::Vector2d> meridian;    // cutter (z, r) from the tip, mm
   ToolAssembly assembly;                    // shank and holder above the cutter, mm
-  std::vector<double> design_deviation_mm;  // per design-surface vertex; NaN where Ω does not reach
+  std::vector<double> design_deviation_mm;  // per design-surface vertex; NaN where Ω does not reach; empty: none
   TriMesh envelope_mm;                      // Ω
-  std::vector<ToolPose> poses;              // the fitted poses (part frame): the axis ruled surface
+  std::vector<ToolPose> poses;              // the fitted poses (part frame): the axis ruled surface; may be empty
   std::vector<ViewerMarker> markers;
 };
 
@@ -44,6 +52,7 @@ struct ViewerFrame {
   std::array<double, 5> values{};  // X Y Z and the two rotary axes as programmed (mm, degrees)
   bool rapid = false;
   int patch = 0;                   // index into ViewerScene::patches: whose tool is in the spindle
+  int line = 0;                    // the program's line (1-based) the frame belongs to; 0: not known
 };
 
 struct ViewerTrack {
@@ -53,12 +62,29 @@ struct ViewerTrack {
   std::vector<ViewerFrame> frames;
 };
 
+// A further "colour by" choice of the design surface (verify.html: the deviation one program machines).
+struct ViewerColouring {
+  std::string name;
+  std::vector<double> deviation_mm;  // per design-surface vertex, NaN where not reached
+};
+
+// The machine for the view's machine mode: the tables turn the part and the heads tilt the tool by
+// the rotary values of a track's frames, through the machine's chain (kinematics/kinematics.h),
+// drawn as simple bodies (a rotary table, a trunnion cradle, head housings).
+struct ViewerMachine {
+  Machine machine;
+  std::vector<double> tool_length_mm;  // per patch: spindle nose to tip as the program is posted
+};
+
 struct ViewerScene {
   double tolerance_mm = 0.01;
+  std::string combined_name = "all patches";  // the surface coloured by the smallest deviation of all
   TriMesh surface_mm;        // the design surface Φ
   TriMesh part_mm;           // the whole part, drawn translucent; empty: Φ is the part
   std::vector<ViewerPatch> patches;
   std::vector<ViewerTrack> tracks;
+  std::vector<ViewerColouring> colourings;
+  std::optional<ViewerMachine> machine;  // none: no machine mode
   std::string validate() const;  // empty when valid: sizes agree, indices in range
 };
 
@@ -66,7 +92,8 @@ struct ViewerOptions {
   int max_surface_triangles = 300000;   // Φ beyond this is decimated (vertex clustering)
   int max_part_triangles = 150000;
   int max_envelope_triangles = 60000;   // per patch
-  int max_frames = 20000;               // per track; longer tracks are subsampled (ends kept)
+  int max_frames = 20000;               // per track; longer tracks are subsampled (ends and marker frames kept)
+  int max_total_frames = 60000;         // all tracks together (~4 MB): beyond it each track's share shrinks in proportion
   std::string validate() const;
 };
 

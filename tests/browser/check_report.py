@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Acceptance test of report.html's 3D view (issue 18) in headless Chromium, standard library only.
+"""Acceptance test of the 3D view of report.html and verify.html (issue 18) in headless Chromium, standard library only.
 
 Runs `flankcam run JOB --out WORK/run`, then for two states of the view (the first pose, and the
 slider moved through the URL hash #track=K&pose=N the page honours):
@@ -9,10 +9,19 @@ slider moved through the URL hash #track=K&pose=N the page honours):
     the slider moved the tool (the pictures differ inside the canvas).
 Then the same job at a tolerance of 1 um, where every patch gouges: the page is ready and #marker=M
 jumps to the worst pose of that gouge.
+verify.html (the same viewer over what `flankcam verify` simulated): `flankcam verify` of the run's
+programs (one dialect, each program and the whole run); the same two states (ready, no console
+message, deviation bands on the canvas, the slider moves the tool, the readout names the program
+line); then a copy of a program with one cutting block moved 1 mm sideways into the blade (exit 4):
+its marker is labelled with that line and #marker=0 jumps to the hit's deepest simulated position;
+the machine mode (#machine=1) turns the tables and puts the tip where the program's joints say.
 Without a browser it exits 77 (CTest: skipped) unless FLANKCAM_REQUIRE_BROWSER=1, then it fails.
---save PATH keeps the second screenshot (the README's picture: examples/conical-tool/report-view.png).
+--save PATH keeps the second screenshot (the README's picture: examples/conical-tool/report-view.png);
+--save-verify PATH the marker jump of verify.html (examples/conical-tool/verify-view.png).
 """
+import json
 import argparse
+import base64
 import os
 import re
 import shutil
@@ -142,6 +151,171 @@ def check_state(browser, page, fragment, png, failures):
     return label.group(1) if label else None, canvas
 
 
+def view_data(page):
+    """The view's JSON embedded in a page."""
+    html = open(page, encoding="utf-8").read()
+    m = re.search(r'<script type="application/json" id="fcv-data">(.*?)</script>', html, re.S)
+    return json.loads(m.group(1)) if m else None
+
+
+def marker_pixels(rows):
+    """Pixels of the collision markers' colour (#ff2060, unlit), the legend's dot (top right) left out."""
+    width = len(rows[0]) if rows else 0
+    return sum(1 for y, row in enumerate(rows) for x, (r, g, b) in enumerate(row)
+               if r > 225 and g < 70 and 60 < b < 130 and not (y < 110 and x >= width - 290))
+
+
+PROGRAM_EXTENSIONS = [".ngc", ".nc", ".mpf", ".h"]  # verify one dialect: the first of these the run wrote
+
+
+def check_verify(browser, a, work, run_dir):
+    """verify.html of the run's programs, then of a program with one cutting block moved into the blade."""
+    failures = []
+    names = sorted(os.listdir(run_dir))
+    ext = next((e for e in PROGRAM_EXTENSIONS if any(n.endswith(e) for n in names)), None)
+    programs = [os.path.join(run_dir, n) for n in names if ext and n.endswith(ext)]
+    if not programs:
+        return ["the run wrote no program to verify"]
+    out = os.path.join(work, "verify")
+    p = subprocess.run([a.flankcam, "verify", "--job", a.job, *programs, "--out", out], capture_output=True, text=True)
+    if p.returncode != 0:
+        return [f"flankcam verify of the run's {len(programs)} program(s) exited {p.returncode}: {p.stderr.strip()}"]
+    page = os.path.join(out, "verify.html")
+    html = open(page, encoding="utf-8").read()
+    print(f"verify.html of {len(programs)} program(s): {len(html) / 1e6:.2f} MB")
+    if re.search(r'<script[^>]+src=|<link[^>]+href="?https?:|https?://[^"\s]*\.js', html):
+        failures.append("verify.html loads something from outside the page")
+    data = view_data(page)
+    report = json.load(open(os.path.join(out, "verify.json"), encoding="utf-8"))
+    if not data:
+        return failures + ["verify.html has no 3D view data"]
+    # One track per program (all its simulated positions) and one of the whole run.
+    simulated = [int(q["positions_simulated"]) for q in report["programs"]]
+    tracks = [t["original_frames"] for t in data["tracks"]]
+    expected = simulated + ([sum(simulated)] if len(simulated) > 1 else [])
+    print(f"verify view: tracks of {tracks} positions, verify simulated {simulated}")
+    if tracks != expected:
+        failures.append(f"the verify view's tracks have {tracks} positions, verify simulated {expected}")
+    # The whole run (the last track), slider at the feed block nearest half way: the tool at the blade.
+    track = len(data["tracks"]) - 1
+    rapid = base64.b64decode(data["tracks"][track]["rapid"])
+    half = len(rapid) // 2
+    pose = min((i for i in range(len(rapid)) if not rapid[i]), key=lambda i: abs(i - half), default=half)
+    first_label, first = check_state(browser, page, "#view=only", os.path.join(work, "verify-first.png"), failures)
+    moved_label, moved = check_state(browser, page, f"#view=only&track={track}&pose={pose}",
+                                     os.path.join(work, "verify-moved.png"), failures)
+    if moved_label != f"pose {pose + 1} / {data['tracks'][track]['frames']}":
+        failures.append(f"verify.html after moving the slider says {moved_label!r}")
+    changed = sum(1 for r0, r1 in zip(first, moved) for p0, p1 in zip(r0, r1) if p0 != p1)
+    print(f"verify.html: pixels changed by moving the slider: {changed}")
+    if changed < 1000:
+        failures.append(f"verify.html: moving the slider changed only {changed} pixels of the canvas")
+    dom, _ = browser.dom("file://" + page + f"#track={track}&pose={pose}")
+    readout = re.search(r'<div id="fcv-readout">([^<]*)</div>', dom)
+    print(f"verify.html readout: {readout.group(1) if readout else None!r}")
+    if not readout or not re.search(r"\bline \d+\b.*programmed X -?\d", readout.group(1)):
+        failures.append(f"verify.html's readout names no program line and axis values: {readout.group(1) if readout else None!r}")
+    failures += check_machine(browser, page, data, work, moved)
+    return failures + check_verify_collision(browser, a, work, programs[0])
+
+
+def check_machine(browser, page, data, work, part_frame):
+    """Machine mode (#machine=1) at the same pose as `part_frame` (the whole-run slider state): the
+    tables turn the part, the picture changes, the bands stay on the canvas; on a table-table machine
+    programmed with joint values (the conical-tool job's xyzac-trt) the tool tip the view computes
+    through the machine's chain is where the program's X Y Z put it."""
+    if not data.get("machine"):
+        return ["verify.html has no machine for its machine mode"]
+    track = len(data["tracks"]) - 1
+    rapid = base64.b64decode(data["tracks"][track]["rapid"])
+    half = len(rapid) // 2
+    pose = min((i for i in range(len(rapid)) if not rapid[i]), key=lambda i: abs(i - half), default=half)
+    fragment = f"#view=only&track={track}&pose={pose}&machine=1"
+    failures = []
+    _, canvas = check_state(browser, page, fragment, os.path.join(work, "verify-machine.png"), failures)
+    changed = sum(1 for r0, r1 in zip(part_frame, canvas) for p0, p1 in zip(r0, r1) if p0 != p1)
+    print(f"{fragment}: pixels changed by the machine mode: {changed}")
+    if changed < 1000:
+        failures.append(f"the machine mode changed only {changed} pixels")
+    dom, _ = browser.dom("file://" + page + fragment)
+    readout = re.search(r'<div id="fcv-readout">([^<]*)</div>', dom)
+    text = readout.group(1) if readout else ""
+    print(f"{fragment}: readout {text!r}")
+    programmed = re.search(r"programmed X (-?[0-9.]+)  Y (-?[0-9.]+)  Z (-?[0-9.]+)", text)
+    machine_tip = re.search(r"machine frame tip (-?[0-9.]+), (-?[0-9.]+), (-?[0-9.]+) mm", text)
+    if not programmed or not machine_tip:
+        return failures + [f"{fragment}: the readout has no programmed X Y Z or no machine frame tip: {text!r}"]
+    if all(r["table"] for r in data["machine"]["rotary"]):
+        xyz = [float(v) for v in programmed.groups()]
+        tip = [float(v) for v in machine_tip.groups()]
+        worst = max(abs(p - q) for p, q in zip(xyz, tip))
+        print(f"{fragment}: machine tip {tip} vs programmed X Y Z {xyz}: {worst:.4f} mm apart")
+        if worst > 0.01:
+            failures.append(f"{fragment}: the machine frame tip {tip} is not the programmed X Y Z {xyz}")
+    return failures
+
+
+def check_verify_collision(browser, a, work, program):
+    """A copy of `program` with the 20th feed block after the first G1 moved 1 mm along X (one side
+    cuts into the blade): exit 4, a marker per hit labelled with its line, #marker=0 jumps there."""
+    lines = open(program, encoding="utf-8").read().split("\n")
+    g1 = next((i for i, l in enumerate(lines) if re.search(r"(^|\s)G0?1\s", l)), None)
+    if g1 is None or g1 + 20 >= len(lines) or not re.search(r"X-?[0-9]", lines[g1 + 20]):
+        return [f"{program}: no feed block with X 20 lines after the first G1 to move"]
+    index = g1 + 20
+    base, ext = os.path.splitext(os.path.basename(program))
+    for delta in (-1.0, 1.0):
+        edited = list(lines)
+        edited[index] = re.sub(r"X(-?[0-9]+\.?[0-9]*)", lambda m: f"X{float(m.group(1)) + delta:.4f}", edited[index], count=1)
+        bad = os.path.join(os.path.dirname(program), f"moved-{base}{ext}")  # beside the program's tool CSV
+        open(bad, "w", encoding="utf-8").write("\n".join(edited))
+        out = os.path.join(work, f"verify-moved{delta:+.0f}")
+        p = subprocess.run([a.flankcam, "verify", "--job", a.job, bad, "--out", out], capture_output=True, text=True)
+        os.remove(bad)
+        if p.returncode == 0:
+            continue
+        if p.returncode != 4:
+            return [f"verify of the moved program exited {p.returncode}: {p.stderr.strip()}"]
+        page = os.path.join(out, "verify.html")
+        data = view_data(page)
+        hits = json.load(open(os.path.join(out, "verify.json"), encoding="utf-8"))["programs"][0]["collisions_and_gouges"]
+        markers = [m for q in data["patches"] for m in q["markers"]]
+        print(f"moved line {index + 1} by X{delta:+.0f}: {len(hits)} hit(s) on lines {sorted({h['line'] for h in hits})}, "
+              f"{len(markers)} marker(s): {markers[0]['label'] if markers else None!r}")
+        failures = []
+        if len(markers) != len(hits) or not markers:
+            return [f"the moved program's view has {len(markers)} markers for {len(hits)} hits"]
+        marked = [int(re.search(r" line (\d+):", m["label"]).group(1)) for m in markers if re.search(r" line (\d+):", m["label"])]
+        if sorted(marked) != sorted(h["line"] for h in hits) or index + 1 not in marked:
+            failures.append(f"markers name lines {marked}, verify.json's hits {[h['line'] for h in hits]}, moved line {index + 1}")
+        frame = markers[0]["frames"][0]
+        fragment = "#view=only&marker=0"
+        dom, console = browser.dom("file://" + page + fragment)
+        state = re.search(r'<body[^>]*data-flankcam-viewer="([^"]*)"', dom)
+        label = re.search(r'<span id="fcv-frame">([^<]*)</span>', dom)
+        readout = re.search(r'<div id="fcv-readout">([^<]*)</div>', dom)
+        print(f"{fragment}: data-flankcam-viewer={state.group(1) if state else None!r}, "
+              f"{label.group(1) if label else None}, readout {readout.group(1) if readout else None!r}")
+        failures += [f"{fragment}: console: {line}" for line in console]
+        if not state or state.group(1) != "ready":
+            failures.append(f"verify.html {fragment}: data-flankcam-viewer is {state.group(1) if state else 'missing'!r}")
+        if not label or not label.group(1).startswith(f"pose {frame + 1} / "):
+            failures.append(f"verify.html {fragment} shows {label.group(1) if label else None!r}, not pose {frame + 1}")
+        if not readout or f"line {marked[0]} " not in readout.group(1):
+            failures.append(f"verify.html {fragment}: the readout does not name line {marked[0]}")
+        png = os.path.join(work, "verify-marker.png")
+        _, canvas = check_state(browser, page, fragment, png, failures)
+        pink = marker_pixels(canvas)
+        print(f"{fragment}: {pink} marker pixels")
+        if pink < 5:
+            failures.append(f"verify.html {fragment}: no collision marker on the canvas ({pink} pixels)")
+        if a.save_verify:
+            shutil.copyfile(png, a.save_verify)
+            print(f"screenshot saved to {a.save_verify}")
+        return failures
+    return [f"moving line {index + 1} of {program} by 1 mm either way along X gouges nothing"]
+
+
 def check_markers(browser, a, work):
     """Gouges at 1 um: markers, and #marker=M shows the marker's pose."""
     job = open(a.job, encoding="utf-8").read()
@@ -179,6 +353,7 @@ def main():
     ap.add_argument("--job", required=True)
     ap.add_argument("--work", required=True, help="scratch directory (emptied)")
     ap.add_argument("--save", help="copy the moved-slider screenshot here")
+    ap.add_argument("--save-verify", help="copy the screenshot of verify.html's marker jump here")
     a = ap.parse_args()
 
     exe = find_browser()
@@ -222,13 +397,15 @@ def main():
     if changed < 1000:
         failures.append(f"moving the slider changed only {changed} pixels of the canvas")
     failures += check_markers(browser, a, work)
+    failures += check_verify(browser, a, work, out)
     if a.save:
         shutil.copyfile(moved_png, a.save)
         print(f"screenshot saved to {a.save}")
     for f in failures:
         print("FAIL:", f)
     if not failures:
-        print("OK: the 3D view is ready, error-free, shows the deviation bands, follows the slider and jumps to markers")
+        print("OK: the 3D view of report.html and verify.html is ready, error-free, shows the deviation bands, follows "
+              "the slider and jumps to markers")
     return 1 if failures else 0
 
 

@@ -9,6 +9,9 @@
 #include <random>
 
 #include "core/errors.h"
+#include "kinematics/machine.h"
+#include "postproc/apt.h"
+#include "postproc/verify_view.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -70,13 +73,13 @@ ViewerScene small_scene(int nx = 12, int ny = 8) {
     const double a = 0.1 * i;
     p.poses.push_back({Eigen::Vector3d(2.0 * i, 1.5, -0.25 * i), Eigen::Vector3d(std::sin(a), 0, std::cos(a))});
   }
-  p.markers.push_back({Eigen::Vector3d(10, 2, 3), 13, "holder collides at poses 12-14, 0.731 mm deep"});
+  p.markers.push_back({Eigen::Vector3d(10, 2, 3), 13, "holder collides at poses 12-14, 0.731 mm deep", {}});
   s.patches.push_back(p);
   ViewerTrack t;
   t.name = "cone-1.ngc";
   t.axis_names = {"X", "Y", "Z", "A", "C"};
   for (size_t i = 0; i < p.poses.size(); ++i)
-    t.frames.push_back({p.poses[i], {1.0 * i, -2.0 * i, 3.5, 10.0 + i, -90.0 + 0.5 * i}, i < 2, 0});
+    t.frames.push_back({p.poses[i], {1.0 * i, -2.0 * i, 3.5, 10.0 + i, -90.0 + 0.5 * i}, i < 2, 0, 0});
   s.tracks.push_back(t);
   return s;
 }
@@ -321,4 +324,265 @@ TEST_CASE("viewer_json subsamples a long track to max_frames, keeping both ends"
   const std::vector<float> tip = floats(j["tracks"][0]["tip"]);
   CHECK(tip[0] == doctest::Approx(s.tracks[0].frames.front().pose.tip.x()));
   CHECK(tip[3 * 6] == doctest::Approx(s.tracks[0].frames.back().pose.tip.x()));
+}
+
+// verify.html's view (postproc/verify_view.h): a cone standing against a wall x = r(z) that it cuts
+// exactly, moving along y; the CL-data pass as flank_program writes it, optionally with one pose
+// pushed `into_mm` into the wall (a gouge on that GOTO's line).
+namespace {
+
+double cone_r(double z) { return 3 + 0.1 * z; }
+
+TriMesh cone_wall() {
+  TriMesh m;
+  const int ny = 60, nz = 20;
+  for (int j = 0; j <= nz; ++j)
+    for (int i = 0; i <= ny; ++i) m.vertices.emplace_back(cone_r(20.0 * j / nz), -30 + 60.0 * i / ny, 20.0 * j / nz);
+  for (int j = 0; j < nz; ++j)
+    for (int i = 0; i < ny; ++i) {
+      const int a = j * (ny + 1) + i, b = a + 1, c = a + ny + 1, d = c + 1;
+      m.faces.push_back({a, b, d});
+      m.faces.push_back({a, d, c});
+    }
+  return m;
+}
+
+VerifyTool cone_tool() {
+  VerifyTool t;
+  std::vector<Eigen::Vector2d> meridian;
+  for (int k = 0; k <= 20; ++k) meridian.emplace_back(1.0 * k, cone_r(1.0 * k));
+  ToolAssembly holder;
+  holder.shank_length = 10, holder.shank_diameter = 6;
+  holder.holder_length = 20, holder.holder_diameter = 16, holder.holder_diameter_far = 24;
+  t.assembly = assembly_from_meridian(meridian, holder);
+  return t;
+}
+
+ClProgram wall_pass(int gouge_pose = -1, double into_mm = 0) {
+  std::vector<ToolPose> poses;
+  for (int i = 0; i <= 20; ++i) poses.push_back({Eigen::Vector3d(0, -20 + 2.0 * i, 0), Eigen::Vector3d::UnitZ()});
+  if (gouge_pose >= 0) poses[size_t(gouge_pose)].tip.x() += into_mm;
+  return flank_program("WALL", poses, cone_tool().assembly.cutter, 600, 10000, 5, 30);
+}
+
+}  // namespace
+
+TEST_CASE("verify view: one frame per simulated position, its pose, line and tool, the deviation verify computed") {
+  const TriMesh wall = cone_wall();
+  const SurfaceIndex part(wall);
+  const VerifyTool tool = cone_tool();
+  VerifyOptions o;
+  o.gouge_tolerance_mm = 0.01;
+  const ClProgram cl = wall_pass();
+  const VerifyReport rep = verify_cl(cl, part, tool, o, &part);
+  REQUIRE(rep.clean());
+  REQUIRE(rep.positions > 100);
+  REQUIRE(rep.motion.size() == size_t(rep.positions));
+  const ViewerScene s = verify_view(wall, {}, 0.01, {{"wall.apt", &rep, {tool}, {"X", "Y", "Z", "A", "C"}, false}});
+  REQUIRE(s.tracks.size() == 1);  // one program: no whole-run track
+  CHECK(s.tracks[0].frames.size() == size_t(rep.positions));
+  const nlohmann::json j = nlohmann::json::parse(viewer_json(s));
+  const auto& t = j["tracks"][0];
+  CHECK(t["original_frames"].get<long>() == rep.positions);
+  REQUIRE(t["frames"].get<long>() == rep.positions);
+  CHECK(t["has_values"] == false);
+  const std::vector<float> tip = floats(t["tip"]), axis = floats(t["axis"]);
+  const std::vector<std::uint8_t> lines = unbase64(t["line"]), rapid = unbase64(t["rapid"]);
+  REQUIRE(tip.size() == 3 * size_t(rep.positions));
+  for (size_t k = 0; k < rep.motion.size(); ++k) {
+    CAPTURE(k);
+    const VerifiedPosition& q = rep.motion[k];
+    CHECK(tip[3 * k + 1] == doctest::Approx(q.pose.tip.y()).epsilon(1e-6));
+    CHECK(axis[3 * k + 2] == doctest::Approx(q.pose.axis.z()).epsilon(1e-6));
+    CHECK(u32_at(lines, k) == std::uint32_t(rep.blocks[size_t(q.block)].line));
+    CHECK(bool(rapid[k]) == rep.blocks[size_t(q.block)].rapid);
+  }
+  // The frames run through every GOTO in order: the line numbers never decrease and reach the last.
+  CHECK(u32_at(lines, rep.motion.size() - 1) == cl.moves.size());
+  // The tool drawn is the one simulated, with its shank and holder; no Ω, no fitted poses.
+  REQUIRE(j["patches"].size() == 1);
+  CHECK(j["patches"][0]["cutter"].size() == tool.assembly.cutter.size());
+  CHECK(j["patches"][0]["holder"][0][1].get<double>() == doctest::Approx(8));
+  CHECK(j["patches"][0]["bands"].is_null());
+  CHECK(j["patches"][0]["envelope"].is_null());
+  CHECK(j["patches"][0]["poses"] == 0);
+  // The surface coloured by the machined deviation verify computed: its bands, vertex by vertex.
+  REQUIRE(j["colourings"].size() == 1);
+  const std::vector<std::uint8_t> bands = unbase64(j["colourings"][0]["bands"]), all = unbase64(j["bands"]);
+  REQUIRE(bands.size() == wall.vertices.size());
+  int within = 0;
+  for (size_t v = 0; v < bands.size(); ++v) {
+    CHECK(bands[v] == std::uint8_t(deviation_band(rep.design.deviation_mm[v], 0.01)));
+    CHECK(all[v] == bands[v]);
+    within += bands[v] == std::uint8_t(DeviationBand::Within);
+  }
+  CHECK(within == rep.design.within);
+  CHECK(within > 100);
+}
+
+TEST_CASE("verify view: a gouge is a marker labelled with its program line that jumps to its deepest position") {
+  const TriMesh wall = cone_wall();
+  const SurfaceIndex part(wall);
+  const VerifyTool tool = cone_tool();
+  VerifyOptions o;
+  const ClProgram clean = wall_pass(), bad = wall_pass(10, 0.5);
+  const VerifyReport a = verify_cl(clean, part, tool, o, &part), b = verify_cl(bad, part, tool, o, &part);
+  REQUIRE(a.clean());
+  REQUIRE_FALSE(b.clean());
+  const std::vector<VerifyViewProgram> programs = {{"clean.apt", &a, {tool}, {"X", "Y", "Z", "A", "C"}, false},
+                                                   {"bad.apt", &b, {tool}, {"X", "Y", "Z", "A", "C"}, false}};
+  const ViewerScene s = verify_view(wall, {}, 0.01, programs);
+  REQUIRE(s.tracks.size() == 3);  // each program and the whole run
+  CHECK(s.tracks[2].frames.size() == size_t(a.positions + b.positions));
+  for (const ViewerOptions& vo : {ViewerOptions{}, ViewerOptions{100, 100, 100, 40, 100}}) {  // whole and subsampled
+    CAPTURE(vo.max_frames);
+    const nlohmann::json j = nlohmann::json::parse(viewer_json(s, vo));
+    REQUIRE(j["patches"].size() == 2);
+    const auto& markers = j["patches"][1]["markers"];
+    REQUIRE(markers.size() == b.hits.size());
+    CHECK(j["patches"][0]["markers"].empty());
+    for (size_t m = 0; m < b.hits.size(); ++m) {
+      const VerifyHit& h = b.hits[m];
+      CAPTURE(h.line);
+      CHECK(markers[m]["label"].get<std::string>().rfind("bad.apt line " + std::to_string(h.line) + ": tool gouge ", 0) == 0);
+      CHECK(markers[m]["at"][0].get<double>() == doctest::Approx(h.point.x()));
+      // The jump lands on the deepest position in the program's track and in the whole run's, not in the clean one.
+      const auto& frames = markers[m]["frames"];
+      CHECK(frames[0] == -1);
+      for (size_t t : {size_t(1), size_t(2)}) {
+        const int f = frames[t];
+        REQUIRE(f >= 0);
+        const std::vector<float> tip = floats(j["tracks"][t]["tip"]);
+        const std::vector<std::uint8_t> lines = unbase64(j["tracks"][t]["line"]);
+        CHECK(tip[3 * size_t(f)] == doctest::Approx(b.motion[size_t(h.position)].pose.tip.x()));
+        CHECK(tip[3 * size_t(f) + 1] == doctest::Approx(b.motion[size_t(h.position)].pose.tip.y()));
+        CHECK(u32_at(lines, size_t(f)) == std::uint32_t(h.line));
+      }
+    }
+    // The gouged line is the moved GOTO or its neighbours (the cutter sweeps into and out of it).
+    bool moved_line = false;
+    for (const VerifyHit& h : b.hits) moved_line |= bad.moves[size_t(h.line - 1)].pose.tip.x() > 0.4;
+    CHECK(moved_line);
+  }
+}
+
+TEST_CASE("verify view: an NC program's frames carry the programmed axis values, interpolated as the controller does") {
+  const Machine m = load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/xyzac-trt.yaml");
+  const TriMesh wall = cone_wall();
+  const SurfaceIndex part(wall);
+  VerifyTool tool = cone_tool();
+  tool.length_mm = 80;
+  std::vector<NcPoint> pts(3);
+  pts[0].line = 5, pts[0].rapid = true, pts[0].at.linear = {0, -60, 120}, pts[0].known = 31;
+  pts[1].line = 6, pts[1].at = {{10, -60, 120}, {20, 30}}, pts[1].known = 31, pts[1].f = 500;
+  pts[2].line = 8, pts[2].at = {{10, -50, 110}, {20, 90}}, pts[2].known = 31, pts[2].f = 500;
+  const VerifyReport rep = verify_program(pts, m, false, part, {tool}, {});
+  REQUIRE(rep.motion.size() == size_t(rep.positions));
+  const ViewerScene s = verify_view(wall, {}, 0.01, {{"p.ngc", &rep, {tool}, {"X", "Y", "Z", "A", "C"}, true}});
+  const nlohmann::json j = nlohmann::json::parse(viewer_json(s));
+  const auto& t = j["tracks"][0];
+  CHECK(t["has_values"] == true);
+  CHECK(t["axes"][4] == "C");
+  REQUIRE(t["frames"].get<long>() == rep.positions);
+  const std::vector<float> values = floats(t["values"]), tip = floats(t["tip"]);
+  const std::vector<std::uint8_t> lines = unbase64(t["line"]);
+  size_t ends = 0;
+  for (size_t k = 0; k < rep.motion.size(); ++k) {
+    CAPTURE(k);
+    const VerifiedPosition& q = rep.motion[k];
+    const NcPoint& to = pts[size_t(q.block)];
+    CHECK(u32_at(lines, k) == std::uint32_t(to.line));
+    // Each value between the block's start and end, the same fraction of the way for all five.
+    const NcPoint& from = pts[size_t(std::max(q.block - 1, 0))];
+    const double f = q.block == 0 ? 1 : (q.programmed.rotary[1] - from.at.rotary[1]) / (to.at.rotary[1] - from.at.rotary[1]);
+    for (int a = 0; a < 3; ++a)
+      CHECK(values[5 * k + size_t(a)] == doctest::Approx((1 - f) * from.at.linear[a] + f * to.at.linear[a]).epsilon(1e-5));
+    CHECK(values[5 * k + 3] == doctest::Approx((1 - f) * from.at.rotary[0] + f * to.at.rotary[0]).epsilon(1e-5));
+    // The pose drawn is the machine's forward kinematics of those values.
+    const ToolPose fk = forward(m, q.programmed, tool.length_mm);
+    CHECK(tip[3 * k] == doctest::Approx(fk.tip.x()).epsilon(1e-5));
+    CHECK(tip[3 * k + 2] == doctest::Approx(fk.tip.z()).epsilon(1e-5));
+    if (k + 1 == rep.motion.size() || rep.motion[k + 1].block != q.block) {
+      ++ends;
+      CHECK(values[5 * k + 4] == doctest::Approx(to.at.rotary[1]));
+    }
+  }
+  CHECK(ends == 3);
+  // The machine mode's chain: the machine file's axes in chain order and each patch's tool length.
+  const ViewerScene sm = verify_view(wall, {}, 0.01, {{"p.ngc", &rep, {tool}, {"X", "Y", "Z", "A", "C"}, true}}, &m);
+  const nlohmann::json jm = nlohmann::json::parse(viewer_json(sm));
+  REQUIRE(jm["machine"].is_object());
+  CHECK(jm["machine"]["name"] == "xyzac-trt");
+  for (size_t k = 0; k < 2; ++k) {
+    CAPTURE(k);
+    CHECK(jm["machine"]["rotary"][k]["name"] == m.rotary[k].name);
+    CHECK(jm["machine"]["rotary"][k]["table"] == (m.rotary[k].carries == Carrier::Table));
+    for (int c = 0; c < 3; ++c) {
+      CHECK(jm["machine"]["rotary"][k]["pivot"][size_t(c)].get<double>() == doctest::Approx(m.rotary[k].pivot[c]));
+      CHECK(jm["machine"]["rotary"][k]["direction"][size_t(c)].get<double>() == doctest::Approx(m.rotary[k].direction[c]));
+    }
+  }
+  CHECK(jm["machine"]["tool_length_mm"] == nlohmann::json::array({80.0}));
+  CHECK(j["machine"].is_null());
+  ViewerScene bad = sm;
+  bad.machine->tool_length_mm.push_back(50);
+  CHECK_THROWS_WITH_AS(viewer_json(bad), doctest::Contains("2 tool lengths for 1 patches"), InputError);
+}
+
+TEST_CASE("verify view refuses a marker that jumps outside its track") {
+  ViewerScene s = small_scene();
+  s.patches[0].markers[0].frames = {20};
+  CHECK_THROWS_WITH_AS(viewer_json(s), doctest::Contains("frame 20 of 20"), InputError);
+  s.patches[0].markers[0].frames = {19, 0};
+  CHECK_THROWS_WITH_AS(viewer_json(s), doctest::Contains("frames for 2 of 1 tracks"), InputError);
+  s.patches[0].markers[0].frames = {-1};
+  s.patches[0].markers[0].pose = 99;  // unused once the frames are given
+  CHECK_NOTHROW((void)viewer_json(s));
+}
+
+TEST_CASE("verify view of a 200k-triangle surface and part with eight long programs: a page under 20 MB, the hits' frames kept") {
+  const TriMesh surface = test::wavy_grid(317, 317, 200, 200, 10), part = test::wavy_grid(317, 317, 200, 200, 30);
+  REQUIRE(surface.faces.size() > 199000);
+  // Eight programs of 30000 simulated positions each, as verify reports them (no simulation here).
+  std::mt19937 rng;
+  std::uniform_real_distribution<double> u(-0.05, 0.05);
+  std::vector<VerifyReport> reports(8);
+  std::vector<VerifyViewProgram> programs;
+  for (size_t k = 0; k < reports.size(); ++k) {
+    VerifyReport& r = reports[k];
+    for (int b = 0; b < 300; ++b) r.blocks.push_back({b, 10 + b, b % 50 == 0, 1, {}, 0.01});
+    for (int i = 0; i < 30000; ++i) {
+      const double s = i / 30000.0;
+      r.motion.push_back({{Eigen::Vector3d(200 * s - 100, 10.0 * k, 5), Eigen::Vector3d::UnitZ()}, {}, i / 100});
+    }
+    r.positions = long(r.motion.size());
+    r.hits.push_back({});
+    r.hits.back().position = 12345 + int(k), r.hits.back().line = 10 + (12345 + int(k)) / 100;
+    r.design.deviation_mm.resize(surface.vertices.size());
+    for (double& d : r.design.deviation_mm) d = u(rng);
+    programs.push_back({"p" + std::to_string(k) + ".nc", &r, {cone_tool()}, {"X", "Y", "Z", "B", "C"}, true});
+  }
+  const ViewerScene s = verify_view(surface, part, 0.01, programs);
+  REQUIRE(s.tracks.size() == 9);
+  const ViewerOptions o;
+  const std::string page = viewer_html(s, o);
+  MESSAGE("verify page of a 200k-triangle surface and part, 8 programs of 30000 positions: ", page.size() / 1e6, " MB");
+  CHECK(page.size() < 20'000'000);
+  const nlohmann::json j = nlohmann::json::parse(viewer_json(s, o));
+  long frames = 0;
+  for (const auto& t : j["tracks"]) frames += t["frames"].get<long>();
+  CHECK(frames <= o.max_total_frames + 2 * 8);  // the shares, and each hit's frame in its track and the whole run
+  CHECK(j["tracks"][8]["original_frames"] == 240000);
+  for (size_t k = 0; k < reports.size(); ++k) {
+    CAPTURE(k);
+    const auto& m = j["patches"][k]["markers"][0];
+    CHECK(m["label"].get<std::string>().rfind("p" + std::to_string(k) + ".nc line " + std::to_string(reports[k].hits[0].line) + ":", 0) == 0);
+    for (size_t t : {k, size_t(8)}) {
+      const int f = m["frames"][t];
+      REQUIRE(f >= 0);
+      const std::vector<float> tip = floats(j["tracks"][t]["tip"]);
+      CHECK(tip[3 * size_t(f)] == doctest::Approx(reports[k].motion[size_t(reports[k].hits[0].position)].pose.tip.x()));
+      CHECK(tip[3 * size_t(f) + 1] == doctest::Approx(10.0 * k));
+    }
+  }
 }
