@@ -18,6 +18,12 @@ namespace flankcam::pipeline {
 
 using Progress = std::function<void(const std::string&)>;  // one line of progress (stderr)
 
+// `tool: {catalogue: NAME}`: the custom tool (general shape) fitted to the same patch, to compare.
+struct CustomComparison {
+  double eps_mm = 0, coverage = 0;  // ε (eq. 13) and share of the surface within the tolerance
+  double diameter_min_mm = 0, diameter_max_mm = 0, length_mm = 0;
+};
+
 struct FittedPatch {
   const PatchJob* job = nullptr;
   PatchFit fit;                  // unit frame
@@ -26,6 +32,8 @@ struct FittedPatch {
   std::vector<Eigen::Vector2d> profile_mm;  // the tool's meridian (z, r) from the tip, mm
   std::vector<Eigen::Vector3d> contacts;    // per pose: the design surface nearest the middle of the cutter, mm
   CollisionReport collisions;    // against the whole part
+  std::optional<CustomComparison> custom;  // catalogue jobs only
+  int allowance_side = 0;        // allowance: +1/-1 the side of the design surface's normals the fit's target lies on
 };
 
 // `patches: auto`: the whole surface as the union of the detected patches (core/detect.h).
@@ -71,6 +79,10 @@ inline const std::string detected_job_name = "detected-job.yaml";
 // Poses in mm, tool assembly, meridian, contact points and the collision and gouge checks of
 // every fitted patch against the whole part (job.part, default the design surface).
 void check_job(const Job& job, FittedJob& fitted, const Progress& progress);
+
+// The grinding sheet of a patch's tool (NAME-tool-sheet.csv): dimensions, then the profile points
+// with diameter and local half angle, mm and degrees.
+[[nodiscard]] std::string tool_sheet(const Job& job, const FittedPatch& patch);
 
 // Rounds a length in mm to 1 nm for reports (stable text, no spurious digits).
 [[nodiscard]] double round_mm(double x);

@@ -30,7 +30,7 @@ void plan_fit_files(const std::string& name, bool tool, bool apt, bool cl, Outpu
   const std::string owner = "patch " + name;
   for (const char* suffix : {"-envelope.ply", "-deviation.ply", "-collisions.obj"}) plan.add(name + suffix, owner);
   if (tool)
-    for (const char* suffix : {"-tool.csv", "-tool.dxf", "-tool.stl"}) plan.add(name + suffix, owner);
+    for (const char* suffix : {"-tool.csv", "-tool.dxf", "-tool.stl", "-tool-sheet.csv"}) plan.add(name + suffix, owner);
   if (apt) plan.add(name + ".apt", owner);
   if (cl) plan.add(name + "-cl.csv", owner);
 }
