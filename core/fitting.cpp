@@ -521,67 +521,44 @@ ToolRadius shared_radii(const std::vector<const SurfaceIndex*>& surfaces, const 
   return constrained_tool(tool, rails.front().length, o.constraints);
 }
 
-std::vector<FitResult> fit_shared_tool(const std::vector<const SurfaceIndex*>& surfaces, std::vector<FitResult> fits,
-                                       double length, const FitOptions& o, int rounds) {
-  if (surfaces.size() != fits.size() || fits.empty()) throw InputError("shared tool: one surface per patch");
+
+namespace {
+// A fit in progress: one or several motions (patches) sharing one tool.
+struct Joint {
   std::vector<Rails> rails;
-  for (FitResult& f : fits) rails.push_back(with_length(f.rails, length));
-  FitOptions fixed = o;
-  fixed.constraints = {};
-  for (int round = 0; round < std::max(1, rounds); ++round) {
-    fixed.fixed_tool = shared_radii(surfaces, rails, o);
-    for (size_t p = 0; p < fits.size(); ++p) {
-      FitResult r = optimize_motion(*surfaces[p], rails[p], fixed);
-      r.eps_ini = fits[p].eps_ini;  // of the patch's own initial motion
-      r.iterations += fits[p].iterations;
-      rails[p] = r.rails;
-      fits[p] = std::move(r);
-    }
-  }
-  return fits;
-}
+  ToolRadius tool;
+  FitStatus status = FitStatus::IterationLimit;
+  std::string message;
+  std::vector<double> objective;  // F_motion after each round
+  int iterations = 0;
+};
 
-FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, const FitOptions& o) {
-  if (auto err = o.validate(); !err.empty()) throw InputError(err);
+// Outer rounds (footpoints recomputed, then one solve) of eq. (12) summed over every motion of `st`
+// with one set of radii; radii_free: d are unknowns (eq. 12) or held. `anchor_tool`: see w_anchor.
+Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, const FitOptions& o, bool radii_free,
+                 const ToolRadius& anchor_tool, int max_rounds) {
   const int m = o.samples_t, n = o.samples_s, Nc = o.rail_control_points;
-  FitResult result;
-  result.rails = initial;
-  if (initial.a.size() != Nc || initial.b.size() != Nc)
-    throw InputError("optimize_motion: rails must have rail_control_points control points");
-  const bool constrained = !o.fixed_tool && o.constraints.active();
-  // A tool no longer than max_length: the axis is shortened at the b end before the fit (the
-  // meridian's own overhang beyond the axis is corrected after it, below).
-  result.tool = o.fixed_tool ? *o.fixed_tool : initial_tool(surface, initial, o);
-  result.eps_ini = sample_error(surface, initial, result.tool, o);
-  if (constrained && result.rails.length > o.constraints.max_length) {
-    result.rails = with_length(result.rails, o.constraints.max_length);
-    result.tool = initial_tool(surface, result.rails, o);
-  }
-  if (constrained) result.tool = constrained_tool(result.tool, result.rails.length, o.constraints);
-  const ToolRadius anchor_tool = result.tool;
-
+  const size_t P = st.rails.size();
   std::vector<BasisRow> rows(static_cast<size_t>(m));
   for (int i = 0; i < m; ++i) rows[size_t(i)] = bspline_basis(Nc, double(i) / (m - 1));
   std::vector<std::vector<double>> tool_basis(static_cast<size_t>(n));
-  for (int j = 0; j < n; ++j) tool_basis[size_t(j)] = result.tool.basis(double(j) / (n - 1));
-  const int K = int(result.tool.D.size());
-
-  // Outer rounds (footpoints recomputed, then one solve); radii_free: d are unknowns (eq. 12) or held.
-  const auto rounds = [&](bool radii_free, int max_rounds) {
-  const double L = result.rails.length;
-  result.status = FitStatus::IterationLimit;
+  for (int j = 0; j < n; ++j) tool_basis[size_t(j)] = st.tool.basis(double(j) / (n - 1));
+  const int K = int(st.tool.D.size());
+  const bool constrained = radii_free && o.constraints.active();
+  st.status = FitStatus::IterationLimit;
   for (int iter = 0; iter < max_rounds; ++iter) {
-    // Unknowns: control points of a(t), b(t) and the radius parameters D.
-    std::vector<double> A(size_t(3 * Nc)), B(size_t(3 * Nc));
-    for (int k = 0; k < Nc; ++k)
-      for (int c = 0; c < 3; ++c) {
-        A[size_t(3 * k + c)] = result.rails.a.ctrl(k, c);
-        B[size_t(3 * k + c)] = result.rails.b.ctrl(k, c);
-      }
-    std::vector<double> D = result.tool.D;
-    const auto fps = sample_footpoints(surface, result.rails, m, n);
+    // Unknowns: control points of every a(t), b(t) and the radius parameters D.
+    std::vector<std::vector<double>> As(P, std::vector<double>(size_t(3 * Nc))), Bs = As;
+    for (size_t p = 0; p < P; ++p)
+      for (int k = 0; k < Nc; ++k)
+        for (int c = 0; c < 3; ++c) {
+          As[p][size_t(3 * k + c)] = st.rails[p].a.ctrl(k, c);
+          Bs[p][size_t(3 * k + c)] = st.rails[p].b.ctrl(k, c);
+        }
+    std::vector<double> D = st.tool.D;
 
     struct SamplePlane {
+      size_t p;
       int i, j;
       Eigen::Vector3d n;
     };
@@ -592,6 +569,12 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     const double w_plane = std::sqrt(o.w_plane / (double(m) * n)), w_point = std::sqrt(o.w_point / (double(m) * n));
     ceres::CauchyLoss robust(w_plane * o.robust_scale);
     ceres::LossFunction* loss = o.robust_scale > 0 ? &robust : nullptr;
+    for (size_t p = 0; p < P; ++p) {
+    std::vector<double>& A = As[p];
+    std::vector<double>& B = Bs[p];
+    const Rails& rails = st.rails[p];
+    const double L = rails.length;
+    const auto fps = sample_footpoints(*surfaces[p], rails, m, n);
     for (int i = 0; i < m; ++i) {
       const BasisRow& row = rows[size_t(i)];
       std::vector<double*> blocks;
@@ -601,11 +584,10 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
       for (int j = 0; j < n; ++j) {
         const Footpoint& f = fps[size_t(i) * n + j];
         const double s = double(j) / (n - 1);
-        const Eigen::Vector3d p = result.rails.point(double(i) / (m - 1), s);
-        const auto plane = sample_plane(p, f);
+        const auto plane = sample_plane(rails.point(double(i) / (m - 1), s), f);
         if (!plane) continue;  // the axis point is beyond Φ's boundary: no data there
         const Eigen::Vector3d nrm = *plane;
-        planes.push_back({i, j, nrm});
+        planes.push_back({p, i, j, nrm});
         problem.AddResidualBlock(new SampleResidual(row, s, f.point, nrm, tool_basis[size_t(j)], w_plane, w_point),
                                  loss, blocks);
       }
@@ -638,6 +620,7 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
         }
       }
     }
+    }  // patches
     // Anchor of the tool radii (not in the paper): on nearly developable surfaces a shift of the axis
     // along the surface normal with an equal change of every d_j leaves the envelope almost unchanged,
     // so the radii are barely determined by Φ. A weak pull to the initial meridian fixes that mode.
@@ -653,8 +636,8 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     }
     // Tool constraints (Sec. 4.6) as one-sided penalties on the radii; the projection after the
     // joint rounds makes them exact.
-    if (radii_free && constrained) {
-      const ConstraintRows c = constraint_rows(result.tool, L, o.constraints);
+    if (constrained) {
+      const ConstraintRows c = constraint_rows(st.tool, st.rails.front().length, o.constraints);
       if (c.h.size() > 0) problem.AddResidualBlock(new fit_residuals::HingeResidual(c.G, c.h, o.w_constraint), nullptr, D.data());
     }
     if (!radii_free) problem.SetParameterBlockConstant(D.data());
@@ -677,8 +660,8 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     // NO_CONVERGENCE only means the round used its solver_iterations; FAILURE (or a cost that is
     // not finite) is a result, not an exception: the last good motion is kept and reported.
     if (fit_residuals::solve_failed(summary)) {
-      result.status = FitStatus::SolverFailed;
-      result.message = "Ceres: " + summary.message;
+      st.status = FitStatus::SolverFailed;
+      st.message = "Ceres: " + summary.message;
       break;
     }
 
@@ -686,35 +669,69 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     // normal of the axis point minus the change of its radius (unit frame). A drift of the axis
     // along the normal with an equal change of the radii (nearly free on developable surfaces,
     // see w_anchor) does not move the envelope and does not count.
-    Rails next = result.rails;
-    for (int k = 0; k < Nc; ++k)
-      for (int c = 0; c < 3; ++c) {
-        next.a.ctrl(k, c) = A[size_t(3 * k + c)];
-        next.b.ctrl(k, c) = B[size_t(3 * k + c)];
-      }
-    ToolRadius next_tool = result.tool;
+    std::vector<Rails> next = st.rails;
+    for (size_t p = 0; p < P; ++p)
+      for (int k = 0; k < Nc; ++k)
+        for (int c = 0; c < 3; ++c) {
+          next[p].a.ctrl(k, c) = As[p][size_t(3 * k + c)];
+          next[p].b.ctrl(k, c) = Bs[p][size_t(3 * k + c)];
+        }
+    ToolRadius next_tool = st.tool;
     next_tool.D = D;
     double moved = 0;
     for (const SamplePlane& sp : planes) {
       const double t = double(sp.i) / (m - 1), s = double(sp.j) / (n - 1);
-      moved = std::max(moved, std::abs((next.point(t, s) - result.rails.point(t, s)).dot(sp.n) -
-                                       (next_tool.d(s) - result.tool.d(s))));
+      moved = std::max(moved, std::abs((next[sp.p].point(t, s) - st.rails[sp.p].point(t, s)).dot(sp.n) -
+                                       (next_tool.d(s) - st.tool.d(s))));
     }
-    result.rails = std::move(next);
-    result.tool = std::move(next_tool);
+    st.rails = std::move(next);
+    st.tool = std::move(next_tool);
     const double objective = 2 * summary.final_cost;  // F_motion, eq. (12)
-    result.objective.push_back(objective);
-    result.iterations += 1;
-    if (o.on_iteration) o.on_iteration(result.iterations, objective);
+    st.objective.push_back(objective);
+    st.iterations += 1;
+    if (o.on_iteration) o.on_iteration(st.iterations, objective);
     // Converged when the motion and the radii stop moving, or when a round cannot lower its own
     // objective (the footpoints, and which samples lie beyond Φ, change between solves, so
     // progress is judged within a solve).
     if (objective <= 0 || moved <= o.motion_tolerance ||
         summary.initial_cost - summary.final_cost < o.stall * summary.initial_cost) {
-      result.status = FitStatus::Converged;
+      st.status = FitStatus::Converged;
       break;
     }
   }
+  return st;
+}
+}  // namespace
+
+FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, const FitOptions& o) {
+  if (auto err = o.validate(); !err.empty()) throw InputError(err);
+  const int Nc = o.rail_control_points;
+  FitResult result;
+  result.rails = initial;
+  if (initial.a.size() != Nc || initial.b.size() != Nc)
+    throw InputError("optimize_motion: rails must have rail_control_points control points");
+  const bool constrained = !o.fixed_tool && o.constraints.active();
+  // A tool no longer than max_length: the axis is shortened at the b end before the fit (the
+  // meridian's own overhang beyond the axis is corrected after it, below).
+  result.tool = o.fixed_tool ? *o.fixed_tool : initial_tool(surface, initial, o);
+  result.eps_ini = sample_error(surface, initial, result.tool, o);
+  if (constrained && result.rails.length > o.constraints.max_length) {
+    result.rails = with_length(result.rails, o.constraints.max_length);
+    result.tool = initial_tool(surface, result.rails, o);
+  }
+  if (constrained) result.tool = constrained_tool(result.tool, result.rails.length, o.constraints);
+  const ToolRadius anchor_tool = result.tool;
+
+  const std::vector<const SurfaceIndex*> surfaces{&surface};
+  const auto rounds = [&](bool radii_free, int max_rounds) {
+    Joint st{{result.rails}, result.tool, result.status, {}, std::move(result.objective), result.iterations};
+    st = fit_rounds(surfaces, std::move(st), o, radii_free, anchor_tool, max_rounds);
+    result.rails = std::move(st.rails.front());
+    result.tool = std::move(st.tool);
+    result.status = st.status;
+    result.message = std::move(st.message);
+    result.objective = std::move(st.objective);
+    result.iterations = st.iterations;
   };
   rounds(!o.fixed_tool, o.max_iterations);
   // Constrained tools: the radii projected onto the constraints, then the motion fitted to that
@@ -730,6 +747,36 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
   result.converged = result.status == FitStatus::Converged;
   result.eps_opt = sample_error(surface, result.rails, result.tool, o);
   return result;
+}
+
+std::vector<FitResult> fit_shared_tool(const std::vector<const SurfaceIndex*>& surfaces, std::vector<FitResult> fits,
+                                       double length, const FitOptions& o) {
+  if (surfaces.size() != fits.size() || fits.empty()) throw InputError("shared tool: one surface per patch");
+  if (auto err = o.validate(); !err.empty()) throw InputError(err);
+  Joint st;
+  for (FitResult& f : fits) st.rails.push_back(with_length(f.rails, length));
+  // Start: the meridian update over all patches (mean distances), then eq. (12) summed over the
+  // patches with their rails and the one set of radii as unknowns, as optimize_motion does for one.
+  st.tool = o.fixed_tool ? *o.fixed_tool : shared_radii(surfaces, st.rails, o);
+  const ToolRadius anchor = st.tool;
+  const bool constrained = !o.fixed_tool && o.constraints.active();
+  st = fit_rounds(surfaces, std::move(st), o, !o.fixed_tool, anchor, o.max_iterations);
+  if (constrained && st.status != FitStatus::SolverFailed) {
+    st.tool = constrained_tool(st.tool, length, o.constraints);
+    st = fit_rounds(surfaces, std::move(st), o, false, anchor, o.max_iterations);
+  }
+  for (size_t p = 0; p < fits.size(); ++p) {
+    FitResult& f = fits[p];
+    f.rails = st.rails[p];
+    f.tool = st.tool;
+    f.iterations += st.iterations;
+    f.objective = st.objective;
+    f.status = st.status;
+    f.converged = st.status == FitStatus::Converged;
+    f.message = st.message;
+    f.eps_opt = sample_error(*surfaces[p], f.rails, f.tool, o);
+  }
+  return fits;
 }
 
 }  // namespace flankcam

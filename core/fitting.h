@@ -184,11 +184,11 @@ struct FitResult {
 // Every rails must have the same length.
 [[nodiscard]] ToolRadius shared_radii(const std::vector<const SurfaceIndex*>& surfaces, const std::vector<Rails>& rails,
                                       const FitOptions& options);
-// Alternates motion-only fits of every patch with the shared tool held fixed and shared_radii over all
-// of them (`rounds` times), starting from their separate fits `fits` (all rails brought to the
-// common `length` first); returns the final fits, all with the same tool.
+// One tool fitted jointly to several patches: eq. (12) summed over the patches, every patch's rails
+// and the one set of radii as unknowns (constraints as in optimize_motion, without the max_length
+// shortening: `length` is the common axis length), starting from the patches' separate fits `fits`
+// with the shared_radii of their rails. Returns the patches' fits, all with the same tool.
 [[nodiscard]] std::vector<FitResult> fit_shared_tool(const std::vector<const SurfaceIndex*>& surfaces,
-                                                     std::vector<FitResult> fits, double length, const FitOptions& options,
-                                                     int rounds = 3);
+                                                     std::vector<FitResult> fits, double length, const FitOptions& options);
 
 }  // namespace flankcam

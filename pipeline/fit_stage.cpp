@@ -332,8 +332,8 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     targets.push_back(target);
     patch_options.push_back(o);
   }
-  // tool: {shared: true}: one custom tool for every patch. The separate fits start it; motion-only
-  // fits with the shared tool alternate with its update over all patches' samples (Sec. 4.5).
+  // tool: {shared: true}: one custom tool for every patch, fitted jointly to all of them (eq. 12
+  // summed over the patches), starting from their separate fits.
   if (job.tool.shared && !catalogue && out.patches.size() > 1) {
     std::vector<FitResult> fits;
     double length = 0;

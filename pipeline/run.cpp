@@ -118,7 +118,9 @@ double tool_length(const Job& job, const FittedPatch& p) {
 RunResult run(Job job, Machine machine, const RunOptions& options) {
   RunResult r;
   r.settings = settings_of(job);
-  r.fit = fit_run(std::move(job), options, [](size_t k) { return int(k) + 1; });
+  // One tool for every patch (shared or from the catalogue): one tool number, so no tool change.
+  const bool one_tool = job.tool.shared || job.tool.catalogue.has_value();
+  r.fit = fit_run(std::move(job), options, [one_tool](size_t k) { return one_tool ? 1 : int(k) + 1; });
   r.machine = std::move(machine);
   const Job& j = r.fit.job;
   const ThreadScope threads(options.threads);

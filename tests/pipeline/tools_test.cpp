@@ -150,3 +150,164 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
   CHECK(ok.tool.shared);
   CHECK(ok.allowance_mm == 0.3);
 }
+
+TEST_CASE("a catalogue tool fitted to its own exact envelope is recovered: coverage >= 95% within 1e-4 of the diagonal") {
+  test::ScratchDir dir("catalogue-fit");
+  const pipeline::CatalogueTool cat = pipeline::find_catalogue_tool(pipeline::tools_dir(), "barrel-d16-r150-l40");
+  // The envelope of the catalogue tool's canal surface (the sphere radii flankcam fits with).
+  const ToolRadius truth = tool_from_meridian(cat.meridian_mm(), 12);
+  const EnvelopeJob e = envelope_job(dir, "arc", truth.profile(), cat.length_mm);
+  const double tol_mm = 1e-4 * e.diagonal_mm;
+  const pipeline::FitRun run = fit_job_file(
+      dir, fmt::format("surface: surface.obj\ntool: {{catalogue: {}}}\ntolerance: {}\npatches:\n", cat.name, tol_mm) +
+               patch_yaml(e, "cat", {0, 0.25, 0.5, 0.75, 1}));
+  REQUIRE(run.fitted.patches.size() == 1);
+  const pipeline::FittedPatch& p = run.fitted.patches[0];
+  MESSAGE("catalogue " << cat.name << ": eps " << run.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max) << " mm, coverage "
+                       << p.fit.coverage << " within " << tol_mm << " mm; custom tool: eps " << p.custom->eps_mm
+                       << " mm, coverage " << p.custom->coverage);
+  CHECK(p.fit.coverage >= 0.95);
+  // The tool is the catalogue's: the fitted meridian is the barrel (Ø16 in the middle, 40 mm long).
+  const ToolDimensions dims = tool_dimensions(p.profile_mm);
+  CHECK(dims.diameter_max_mm == doctest::Approx(16).epsilon(1e-3));
+  CHECK(p.assembly.cutter_length() == doctest::Approx(40).epsilon(1e-9));
+  // The report compares it with the best custom tool on the same patch.
+  REQUIRE(p.custom);
+  CHECK(p.custom->coverage > 0);
+  const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
+  CHECK(j["tool"]["catalogue"]["name"] == cat.name);
+  CHECK(j["compare_custom_tool"]["catalogue"]["coverage"] == p.fit.coverage);
+  CHECK(j["compare_custom_tool"]["custom"]["eps_mm"].get<double>() == doctest::Approx(p.custom->eps_mm).epsilon(1e-6));
+}
+
+TEST_CASE("a job's tool limits hold on every fitted meridian, and the grinding sheet states them") {
+  test::ScratchDir dir("tool-limits");
+  // Barrel: Ø12 at the ends, Ø15 in the middle, 40 mm, 8.5 deg at the ends; the limits cut into all of it.
+  const EnvelopeJob e = envelope_job(dir, "twist", barrel_profile(6, 1.5), 40);
+  const pipeline::FitRun run = fit_job_file(
+      dir, "surface: surface.obj\ntolerance: 0.05\n"
+           "tool: {min_diameter: 11, max_diameter: 14, max_length: 35, min_tip_diameter: 12.5, max_cone_angle: 5, convex: true}\n"
+           "patches:\n" + patch_yaml(e, "a", {0, 0.5, 1}) + patch_yaml(e, "b", {0.2, 0.5, 0.8}));
+  for (const pipeline::FittedPatch& p : run.fitted.patches) {
+    CAPTURE(p.job->name);
+    const ToolDimensions d = tool_dimensions(p.profile_mm);
+    double steepest = 0;
+    for (size_t i = 1; i < p.profile_mm.size(); ++i) {
+      const Eigen::Vector2d s = p.profile_mm[i] - p.profile_mm[i - 1];
+      steepest = std::max(steepest, std::atan2(std::abs(s.y()), s.x()) * 180 / M_PI);
+    }
+    MESSAGE(p.job->name << ": D " << d.diameter_min_mm << ".." << d.diameter_max_mm << " tip " << 2 * p.profile_mm.front().y()
+                        << " L " << d.length_mm << " steepest " << steepest << " deg, eps "
+                        << run.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max) << " mm, coverage " << p.fit.coverage);
+    CHECK(d.diameter_min_mm >= 11 - 1e-6);
+    CHECK(d.diameter_max_mm <= 14 + 1e-6);
+    CHECK(d.length_mm <= 35 + 1e-6);
+    CHECK(2 * p.profile_mm.front().y() >= 12.5 - 1e-6);
+    CHECK(steepest <= 5 + 1e-6);
+    const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
+    CHECK(j["tool"]["constraints"]["met"] == true);
+    CHECK(j["coverage"].get<double>() > 0);
+    // Grinding sheet: dimensions first, then one row per profile point (z, r, diameter, half angle).
+    std::istringstream sheet(pipeline::tool_sheet(run.job, p));
+    std::map<std::string, double> value;
+    std::vector<std::array<double, 4>> rows;
+    std::string line;
+    while (std::getline(sheet, line)) {
+      if (line.empty() || line[0] == '#' || line.rfind("point,", 0) == 0) continue;
+      std::vector<std::string> cells;
+      std::stringstream ls(line);
+      for (std::string c; std::getline(ls, c, ',');) cells.push_back(c);
+      if (cells.size() == 2) value[cells[0]] = std::stod(cells[1]);
+      if (cells.size() == 5) rows.push_back({std::stod(cells[1]), std::stod(cells[2]), std::stod(cells[3]), std::stod(cells[4])});
+    }
+    CHECK(value["tolerance_mm"] == 0.05);
+    CHECK(value["max_diameter_mm"] == doctest::Approx(d.diameter_max_mm).epsilon(1e-4));
+    CHECK(value["min_diameter_mm"] == doctest::Approx(d.diameter_min_mm).epsilon(1e-4));
+    CHECK(value["cutting_length_mm"] == doctest::Approx(d.length_mm).epsilon(1e-4));
+    CHECK(value["steepest_half_angle_deg"] <= 5 + 1e-3);
+    REQUIRE(rows.size() == p.profile_mm.size());
+    for (size_t i = 0; i < rows.size(); ++i) {
+      CHECK(rows[i][0] == doctest::Approx(p.profile_mm[i].x()).epsilon(1e-4));
+      CHECK(rows[i][2] == doctest::Approx(2 * rows[i][1]).epsilon(1e-4));
+    }
+  }
+}
+
+TEST_CASE("tool: {shared: true} gives two patches one identical meridian, each within the tolerance") {
+  test::ScratchDir dir("shared-tool");
+  const EnvelopeJob e = envelope_job(dir, "twist", barrel_profile(6, 1.5), 40);
+  const double tol_mm = 2e-5 * e.diagonal_mm;  // 0.0026 mm
+  const std::string patches = "patches:\n" + patch_yaml(e, "first", {0, 0.25, 0.5}) + patch_yaml(e, "second", {0.5, 0.75, 1});
+  const pipeline::FitRun separate = fit_job_file(dir, fmt::format("surface: surface.obj\ntolerance: {}\n", tol_mm) + patches);
+  const pipeline::FitRun shared =
+      fit_job_file(dir, fmt::format("surface: surface.obj\ntolerance: {}\ntool: {{shared: true}}\n", tol_mm) + patches);
+  REQUIRE(shared.fitted.patches.size() == 2);
+  const auto& a = shared.fitted.patches[0];
+  const auto& b = shared.fitted.patches[1];
+  CHECK(a.fit.fit.tool.D == b.fit.fit.tool.D);
+  CHECK(a.profile_mm == b.profile_mm);
+  CHECK(separate.fitted.patches[0].profile_mm != separate.fitted.patches[1].profile_mm);
+  for (const auto* run : {&separate, &shared})
+    for (const pipeline::FittedPatch& p : run->fitted.patches) {
+      const double eps_mm = run->fitted.frame.length_to_mm(p.fit.fit.eps_opt.max);
+      MESSAGE(std::string(run == &shared ? "shared " : "separate ") << p.job->name << ": eps " << eps_mm << " mm (tolerance " << tol_mm
+                                                          << "), coverage " << p.fit.coverage);
+      CHECK(eps_mm <= tol_mm);
+    }
+}
+
+TEST_CASE("allowance: 0.2 leaves 0.2 mm of stock within the tolerance wherever the tool cuts") {
+  test::ScratchDir dir("allowance");
+  const EnvelopeJob e = envelope_job(dir, "arc", cone_profile(6, 9), 40);
+  const double tol = 0.01;
+  const pipeline::FitRun run = fit_job_file(
+      dir, fmt::format("surface: surface.obj\ntolerance: {}\nallowance: 0.2\ntool: {{shape: cone}}\npatches:\n", tol) +
+               patch_yaml(e, "semi", {0, 0.25, 0.5, 0.75, 1}));
+  const pipeline::FittedPatch& p = run.fitted.patches.at(0);
+  // The machined surface against the design surface itself (not the fit's offset target).
+  const SurfaceIndex design(run.fitted.unit_surface);
+  const MachinedSurface ms = machined_surface(design, p.fit.fit.rails, p.fit.fit.tool);
+  const std::vector<double> area = [&] {
+    std::vector<double> a(run.fitted.unit_surface.vertices.size(), 0.0);
+    for (const auto& f : run.fitted.unit_surface.faces) {
+      const auto& v = run.fitted.unit_surface.vertices;
+      const double fa = 0.5 * (v[size_t(f[1])] - v[size_t(f[0])]).cross(v[size_t(f[2])] - v[size_t(f[0])]).norm() / 3;
+      for (int k = 0; k < 3; ++k) a[size_t(f[k])] += fa;
+    }
+    return a;
+  }();
+  double reached = 0, within = 0, total = 0, lo = INFINITY, hi = -INFINITY;
+  for (size_t v = 0; v < ms.design_deviation.size(); ++v) {
+    total += area[v];
+    const double d = ms.design_deviation[v];
+    if (!std::isfinite(d)) continue;
+    const double mm = run.fitted.frame.length_to_mm(d);
+    reached += area[v];
+    if (std::abs(mm - 0.2) <= tol) within += area[v];
+    lo = std::min(lo, mm), hi = std::max(hi, mm);
+  }
+  MESSAGE("stock left: " << lo << " .. " << hi << " mm; " << within / reached << " of the reached area within 0.2 +- " << tol
+                         << " mm; reached " << reached / total << "; coverage of the offset target " << p.fit.coverage);
+  CHECK(reached / total > 0.9);
+  CHECK(within / reached >= 0.95);
+  CHECK(lo >= 0.2 - tol);  // nowhere does the semi-finishing pass cut into the last 0.2 mm beyond the tolerance
+  const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
+  CHECK(j["allowance"]["allowance_mm"] == 0.2);
+}
+
+TEST_CASE("overtravel continues the motion by that many mm beyond both ends along the direction of travel") {
+  test::ScratchDir dir("overtravel");
+  const EnvelopeJob e = envelope_job(dir, "arc", cylinder_profile(6), 40);
+  const std::string rest = "tool: {shape: cylinder}\npatches:\n" + patch_yaml(e, "p", {0, 0.5, 1});
+  const pipeline::FitRun plain = fit_job_file(dir, "surface: surface.obj\n" + rest);
+  const pipeline::FitRun over = fit_job_file(dir, "surface: surface.obj\novertravel: 7.5\n" + rest);
+  const auto& a = plain.fitted.patches.at(0).poses;
+  const auto& b = over.fitted.patches.at(0).poses;
+  REQUIRE(b.size() == a.size() + 2);
+  for (size_t i = 0; i < a.size(); ++i) CHECK((b[i + 1].tip - a[i].tip).norm() < 1e-12);
+  CHECK((b.front().tip - a.front().tip).norm() == doctest::Approx(7.5));
+  CHECK((b.back().tip - a.back().tip).norm() == doctest::Approx(7.5));
+  CHECK((b.front().tip - a.front().tip).dot(a[1].tip - a[0].tip) < 0);  // before the start, not back over the surface
+  CHECK((b.back().tip - a.back().tip).dot(a.back().tip - a[a.size() - 2].tip) > 0);
+  CHECK(b.front().axis == a.front().axis);
+}
