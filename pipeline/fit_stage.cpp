@@ -86,6 +86,30 @@ std::optional<LoadedMesh> load_job_part(const Job& job) {
       .loaded;
 }
 
+namespace {
+// The fitted motion at its samples t_i in mm (part coordinates), with the overtravel poses.
+std::vector<ToolPose> poses_mm(const Job& job, const Similarity& frame, const Rails& rails) {
+  const int m = job.fit.samples_t;
+  std::vector<ToolPose> poses;
+  for (int i = 0; i < m; ++i) {
+    const double t = double(i) / (m - 1);
+    const Eigen::Vector3d a = frame.to_mm(rails.a.point(t)), b = frame.to_mm(rails.b.point(t));
+    poses.push_back({a, (b - a).normalized()});
+  }
+  // overtravel: the motion continued by that many mm beyond both ends, along the tip's direction
+  // of travel there, the axis held.
+  if (job.overtravel_mm > 0 && poses.size() >= 2) {
+    const auto beyond = [&](const ToolPose& end, const ToolPose& inner) {
+      return ToolPose{end.tip + job.overtravel_mm * (end.tip - inner.tip).normalized(), end.axis};
+    };
+    const ToolPose first = beyond(poses[0], poses[1]), last = beyond(poses.back(), poses[poses.size() - 2]);
+    poses.insert(poses.begin(), first);
+    poses.push_back(last);
+  }
+  return poses;
+}
+}  // namespace
+
 void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   const std::optional<LoadedMesh> separate = load_job_part(job);
   const TriMesh& part = separate ? separate->mesh : f.surface.mesh;
@@ -104,30 +128,21 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   o.gouge_tolerance_mm = job.tolerance_mm;
   for (FittedPatch& p : f.patches) {
     const FitResult& r = p.fit.fit;
-    const int m = job.fit.samples_t;
-    p.poses.clear();
-    for (int i = 0; i < m; ++i) {
-      const double t = double(i) / (m - 1);
-      const Eigen::Vector3d a = f.frame.to_mm(r.rails.a.point(t)), b = f.frame.to_mm(r.rails.b.point(t));
-      p.poses.push_back({a, (b - a).normalized()});
-    }
-    // overtravel: the motion continued by that many mm beyond both ends, along the tip's direction
-    // of travel there, the axis held.
-    if (job.overtravel_mm > 0 && p.poses.size() >= 2) {
-      const auto beyond = [&](const ToolPose& end, const ToolPose& inner) {
-        const Eigen::Vector3d dir = end.tip - inner.tip;
-        return ToolPose{end.tip + job.overtravel_mm * dir.normalized(), end.axis};
-      };
-      const ToolPose first = beyond(p.poses[0], p.poses[1]), last = beyond(p.poses.back(), p.poses[p.poses.size() - 2]);
-      p.poses.insert(p.poses.begin(), first);
-      p.poses.push_back(last);
-    }
+    p.poses = poses_mm(job, f.frame, r.rails);
     p.assembly = assembly_of(job, f.frame, r);
     p.profile_mm = tool_profile_mm(f.frame, r);
     const double half = 0.5 * p.assembly.cutter_length();
     p.contacts.clear();
     for (const ToolPose& q : p.poses) p.contacts.push_back(design.closest(q.tip + half * q.axis).point);
     p.collisions = check_collisions(index, p.poses, p.assembly, o);
+    for (PassMotion& pm : p.earlier_passes) {  // earlier passes: their own poses, the same tool
+      pm.poses = poses_mm(job, f.frame, pm.rails);
+      pm.contacts.clear();
+      for (const ToolPose& q : pm.poses) pm.contacts.push_back(design.closest(q.tip + half * q.axis).point);
+      const CollisionReport c = check_collisions(index, pm.poses, p.assembly, o);
+      p.collisions.intervals.insert(p.collisions.intervals.end(), c.intervals.begin(), c.intervals.end());
+      p.collisions.positions_checked += c.positions_checked;
+    }
     for (const std::string& line : collision_summary(p)) progress(line);
   }
 }
@@ -296,12 +311,13 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     FittedPatch fp;
     fp.job = &p;
     const SurfaceIndex* target = &index;
-    if (job.allowance_mm > 0) {
-      fp.allowance_side = lines_side(index, spec);
-      offsets.push_back(std::make_unique<SurfaceIndex>(
-          offset_mesh(out.unit_surface, out.frame.length_to_unit(job.allowance_mm), fp.allowance_side)));
+    const double allowance = job.passes_mm.empty() ? job.allowance_mm : job.passes_mm.back();
+    if (allowance > 0 || job.passes_mm.size() > 1) fp.allowance_side = lines_side(index, spec);
+    if (allowance > 0) {
+      offsets.push_back(
+          std::make_unique<SurfaceIndex>(offset_mesh(out.unit_surface, out.frame.length_to_unit(allowance), fp.allowance_side)));
       target = offsets.back().get();
-      progress(fmt::format("patch {}: fitted to the surface offset by the allowance {} mm", p.name, job.allowance_mm));
+      progress(fmt::format("patch {}: fitted to the surface offset by the allowance {} mm", p.name, allowance));
     }
     if (catalogue) {
       // The catalogue tool's length is the axis length; the user's lines keep their tip ends.
@@ -353,6 +369,27 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
       report_fit(job, out, fp, progress);
     }
   }
+  // passes: every pass but the last with the last pass's tool held, its motion fitted to Φ offset by
+  // the pass's allowance (started from the last pass's motion).
+  for (size_t k = 0; k + 1 < job.passes_mm.size(); ++k)
+    for (FittedPatch& fp : out.patches) {
+      PassMotion pm;
+      pm.allowance_mm = job.passes_mm[k];
+      const SurfaceIndex target(
+          pm.allowance_mm > 0 ? offset_mesh(out.unit_surface, out.frame.length_to_unit(pm.allowance_mm), fp.allowance_side)
+                              : out.unit_surface);
+      FitOptions o = fit_options();
+      o.fixed_tool = fp.fit.fit.tool;
+      o.constraints = {};
+      const FitResult r = optimize_motion(target, fp.fit.fit.rails, o);
+      pm.rails = r.rails;
+      pm.eps_mm = out.frame.length_to_mm(r.eps_opt.max);
+      pm.coverage = coverage(target.mesh(), machined_surface(target, r.rails, r.tool).design_deviation,
+                             out.frame.length_to_unit(job.tolerance_mm));
+      progress(fmt::format("patch {}: pass {} (allowance {} mm): eps {:.4f} mm, coverage {:.1f}%", fp.job->name, k + 1,
+                           pm.allowance_mm, pm.eps_mm, 100 * pm.coverage));
+      fp.earlier_passes.push_back(std::move(pm));
+    }
   check_job(job, out, progress);
   return out;
 }
@@ -437,8 +474,15 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
         {"custom", {{"eps_mm", round_mm(p.custom->eps_mm)}, {"coverage", p.custom->coverage},
                     {"diameter_min", round_mm(p.custom->diameter_min_mm)}, {"diameter_max", round_mm(p.custom->diameter_max_mm)},
                     {"length", round_mm(p.custom->length_mm)}}}};
-  if (job.allowance_mm > 0)
-    j["allowance"] = {{"allowance_mm", job.allowance_mm},
+  if (!job.passes_mm.empty()) {
+    auto& passes = j["passes"] = nlohmann::ordered_json::array();
+    for (const PassMotion& pm : p.earlier_passes)
+      passes.push_back({{"allowance_mm", pm.allowance_mm}, {"eps_mm", round_mm(pm.eps_mm)}, {"coverage", pm.coverage}});
+    passes.push_back({{"allowance_mm", job.passes_mm.back()}, {"eps_mm", round_mm(fr.length_to_mm(r.eps_opt.max))},
+                      {"coverage", p.fit.coverage}});
+  }
+  if (const double a = job.passes_mm.empty() ? job.allowance_mm : job.passes_mm.back(); a > 0)
+    j["allowance"] = {{"allowance_mm", a},
                       {"note", "the fit's target, coverage and deviation are the design surface offset by the allowance "
                                "towards the tool"}};
   if (job.overtravel_mm > 0) j["overtravel_mm"] = job.overtravel_mm;
@@ -515,6 +559,18 @@ std::string tool_sheet(const Job& job, const FittedPatch& p) {
   for (size_t i = 0; i < zr.size(); ++i)
     out += fmt::format("{},{},{},{},{}\n", i + 1, fixed(zr[i].x(), 4), fixed(zr[i].y(), 4), fixed(2 * zr[i].y(), 4), fixed(angle(i), 4));
   return out;
+}
+
+ClProgram pass_program(const Job& job, const FittedJob& f, const FittedPatch& p, const PassMotion& pm, int tool) {
+  ClProgram cl = flank_program(p.job->name, pm.poses, p.profile_mm, job.feed_mm_min, job.spindle_rpm, job.lead_in_mm,
+                               job.retract_mm);
+  cl.tool = tool;
+  const size_t first = job.lead_in_mm < job.retract_mm ? 2 : 1;
+  for (size_t i = 0; i < pm.poses.size(); ++i) cl.moves[first + i].contact = pm.contacts[i];
+  cl.comments.push_back(fmt::format("FLANKCAM PASS WITH ALLOWANCE {} MM ON {}, EPS {:.4f} MM", pm.allowance_mm,
+                                    job.surface.filename().string(), pm.eps_mm));
+  (void)f;
+  return cl;
 }
 
 ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p, int tool) {

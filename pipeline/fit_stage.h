@@ -24,6 +24,15 @@ struct CustomComparison {
   double diameter_min_mm = 0, diameter_max_mm = 0, length_mm = 0;
 };
 
+// `passes:` before the last one: the same tool's motion fitted to Φ offset by the pass's allowance.
+struct PassMotion {
+  double allowance_mm = 0;
+  Rails rails;                               // unit frame
+  double eps_mm = 0, coverage = 0;           // against the offset surface
+  std::vector<ToolPose> poses;               // mm, like FittedPatch::poses
+  std::vector<Eigen::Vector3d> contacts;
+};
+
 struct FittedPatch {
   const PatchJob* job = nullptr;
   PatchFit fit;                  // unit frame
@@ -33,6 +42,7 @@ struct FittedPatch {
   std::vector<Eigen::Vector3d> contacts;    // per pose: the design surface nearest the middle of the cutter, mm
   CollisionReport collisions;    // against the whole part
   std::optional<CustomComparison> custom;  // catalogue jobs only
+  std::vector<PassMotion> earlier_passes;  // `passes:`: every pass but the last (which is `fit`), in order
   int allowance_side = 0;        // allowance: +1/-1 the side of the design surface's normals the fit's target lies on
 };
 
@@ -97,5 +107,8 @@ void check_job(const Job& job, FittedJob& fitted, const Progress& progress);
 // The patch's CL-data (APT model): approach, the fitted poses at the job's feed, retract; the tool's
 // meridian in mm; a comment with the fitted error and one flagging allowed collisions.
 [[nodiscard]] ClProgram patch_program(const Job& job, const FittedJob& fitted, const FittedPatch& patch, int tool);
+// The CL-data of an earlier pass (PassMotion) of the patch, the same tool.
+[[nodiscard]] ClProgram pass_program(const Job& job, const FittedJob& fitted, const FittedPatch& patch, const PassMotion& pass,
+                                     int tool);
 
 }  // namespace flankcam::pipeline

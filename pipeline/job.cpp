@@ -213,7 +213,7 @@ Job read_job(const std::filesystem::path& file) {
   const Reader r(name);
   const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
-  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post", "allowance", "overtravel"});
+  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post", "allowance", "passes", "overtravel"});
 
   Job job;
   job.file = file;
@@ -246,6 +246,16 @@ Job read_job(const std::filesystem::path& file) {
   if (job.retract_mm < job.lead_in_mm) r.fail(root["retract"] ? root["retract"] : root, "retract", "must be >= lead_in");
   if (const YAML::Node t = root["tool"]) read_tool(r, t, job);
   if (root["allowance"]) job.allowance_mm = in_range(r, root["allowance"], "allowance", 0, 100, "mm");
+  if (const YAML::Node ps = root["passes"]) {
+    if (root["allowance"]) r.fail(root["allowance"], "allowance", "not with passes: (give each pass its allowance)");
+    if (!ps.IsSequence() || ps.size() == 0 || ps.size() > 20)
+      r.fail(ps, "passes", "expected a list of 1 to 20 passes such as [{allowance: 0.3}, {allowance: 0}]");
+    for (size_t k = 0; k < ps.size(); ++k) {
+      const std::string key = fmt::format("passes[{}]", k);
+      r.only_keys(ps[k], key, {"allowance"});
+      job.passes_mm.push_back(in_range(r, r.need(ps[k], "allowance", key + ".allowance"), key + ".allowance", 0, 100, "mm"));
+    }
+  }
   if (root["overtravel"]) job.overtravel_mm = in_range(r, root["overtravel"], "overtravel", 0, 1000, "mm");
   if (root["tolerance"]) job.tolerance_mm = in_range(r, root["tolerance"], "tolerance", 1e-5, 100, "mm");
   if (const YAML::Node s = root["sampling"]) {
@@ -297,6 +307,13 @@ Job read_job(const std::filesystem::path& file) {
   const YAML::Node ps = root["patches"];
   if (!ps) throw InputError(name + ": patches: missing (a list of patches with their initialisation, or auto)");
   if (ps.IsScalar() && ps.Scalar() == "auto") {
+    // Detection fits its own motions and tools patch by patch: a fixed or shared tool and an
+    // allowance are for listed patches (detected-job.yaml can take them).
+    if (const YAML::Node t = root["tool"])
+      for (const char* k : {"catalogue", "shared"})
+        if (t[k]) r.fail(t[k], std::string("tool.") + k, "not with patches: auto (list the patches, e.g. from detected-job.yaml)");
+    for (const char* k : {"allowance", "passes"})
+      if (root[k]) r.fail(root[k], k, "not with patches: auto (list the patches, e.g. from detected-job.yaml)");
     CoverJob& c = job.cover.emplace();
     if (const YAML::Node cv = root["cover"]) {
       if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8}");

@@ -62,6 +62,7 @@ struct ToolJob {
   [[nodiscard]] bool constrained() const;
 };
 
+
 // The setup's rotation R (work = R part + t).
 [[nodiscard]] Eigen::Matrix3d setup_rotation(const PostJob& post);
 
@@ -82,6 +83,7 @@ struct Job {
   FitOptions fit;                   // sampling, weights, shape, iterations (unit-free parts)
   ToolJob tool;                     // constraints, catalogue, shared (mm; turned into fit options per surface)
   double allowance_mm = 0;          // stock left on the design surface: the fit's target is Φ offset by it
+  std::vector<double> passes_mm;    // passes: [{allowance: A}, ...], in order; empty: one pass at allowance_mm
   double overtravel_mm = 0;         // the motion continued beyond the surface at both ends
   std::vector<PatchJob> patches;   // empty with `patches: auto`
   std::optional<CoverJob> cover;   // set: `patches: auto`

@@ -131,11 +131,16 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     const FittedPatch& p = r.fit.fitted.patches[k];
     r.tool_length_mm.push_back(tool_length(j, p));
     if (!r.fit.cl_data[k]) continue;
-    ClProgram work = *r.fit.cl_data[k];
-    for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
     ToolAssembly assembly = p.assembly;  // the program's cutter is the tool's meridian
     assembly.cutter = p.profile_mm;
-    inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back(), std::move(assembly)});
+    // passes: each its own section of the patch's program, in order, the last pass being the fit.
+    std::vector<ClProgram> sections;
+    for (const PassMotion& pm : p.earlier_passes) sections.push_back(pass_program(j, r.fit.fitted, p, pm, r.fit.cl_data[k]->tool));
+    sections.push_back(*r.fit.cl_data[k]);
+    for (ClProgram& work : sections) {
+      for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
+      inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back(), assembly});
+    }
   }
   if (inputs.empty()) return r;
   // The part placed on the machine (work frame): the links are planned against it, and every

@@ -14,6 +14,7 @@
 #include "pipeline/data_dir.h"
 #include "pipeline/run.h"
 #include "pipeline/tool_catalogue.h"
+#include "postproc/gcode.h"
 #include "postproc/tool_export.h"
 #include "tests/test_util.h"
 
@@ -49,6 +50,11 @@ std::string patch_yaml(const EnvelopeJob& e, const std::string& name, const std:
 pipeline::FitRun fit_job_file(const test::ScratchDir& dir, const std::string& yaml) {
   test::write_text(dir.file("job.yaml"), yaml);
   return pipeline::fit(pipeline::read_job(dir.file("job.yaml")), {});
+}
+int count_m6(const std::string& text) {
+  int n = 0;
+  for (size_t at = text.find("M6"); at != std::string::npos; at = text.find("M6", at + 1)) ++n;
+  return n;
 }
 std::string error_of(const test::ScratchDir& dir, const std::string& yaml) {
   test::write_text(dir.file("job.yaml"), yaml);
@@ -133,12 +139,22 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
       {"tool: {convex: yes, diameter: 3}", ":1: tool.diameter: unknown key"},
       {"allowance: -0.1", ":1: allowance: must be in 0 .. 100 mm"},
       {"overtravel: x", ":1: overtravel: expected a number"},
+      {"passes: [{allowance: 0.3}, {depth: 2}]", ":1: passes[1].depth: unknown key"},
+      {"passes: []", ":1: passes: expected a list of 1 to 20 passes"},
+      {"allowance: 0.1\npasses: [{allowance: 0}]", ":1: allowance: not with passes:"},
   };
   for (const auto& c : cases) {
     CAPTURE(c.tool);
     const std::string msg = error_of(dir, std::string(c.tool) + "\n" + rest);
     CAPTURE(msg);
     CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
+  }
+  for (const char* key : {"tool: {catalogue: cyl-d6-l20}", "tool: {shared: true}", "allowance: 0.2"}) {
+    CAPTURE(key);
+    const std::string msg = error_of(dir, std::string(key) + "\nsurface: s.obj\npatches: auto\n");
+    CAPTURE(msg);
+    CHECK(msg.find(dir.file("job.yaml") + ":1: ") != std::string::npos);
+    CHECK(msg.find("not with patches: auto") != std::string::npos);
   }
   const pipeline::Job ok = [&] {
     test::write_text(dir.file("job.yaml"), "tool: {catalogue: barrel-d16-r150-l40, shared: true}\nallowance: 0.3\n" + rest);
@@ -310,4 +326,56 @@ TEST_CASE("overtravel continues the motion by that many mm beyond both ends alon
   CHECK((b.front().tip - a.front().tip).dot(a[1].tip - a[0].tip) < 0);  // before the start, not back over the surface
   CHECK((b.back().tip - a.back().tip).dot(a.back().tip - a[a.size() - 2].tip) > 0);
   CHECK(b.front().axis == a.front().axis);
+}
+
+TEST_CASE("passes: each pass is its own section of the patch's program, in order, the earlier one 0.3 mm off") {
+  test::ScratchDir dir("passes");
+  const std::string ex = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/";
+  const std::string job = "surface: " + ex + "blade.obj\ntool: {shape: cone}\ntolerance: 0.015\nsampling: {s: 20, t: 60}\n"
+                          "passes: [{allowance: 0.3}, {allowance: 0}]\nmachine: xyzbc-head-table\npost: {dialects: [iso]}\n"
+                          "patches:\n  - name: two-pass\n    init: lines\n    lines:\n"
+                          "      - [5.350, 10.342, -1.086, 0.669, 10.353, 60.944]\n"
+                          "      - [10.691, 10.006, -1.233, 4.819, 11.629, 60.825]\n"
+                          "      - [15.884, 9.359, -1.377, 8.927, 12.621, 60.707]\n";
+  test::write_text(dir.file("job.yaml"), job);
+  pipeline::Job j = pipeline::read_job(dir.file("job.yaml"));
+  REQUIRE(j.passes_mm == std::vector<double>{0.3, 0});
+  const Machine machine = pipeline::check_run(j);
+  const pipeline::RunResult run = pipeline::run(std::move(j), machine, {});
+  const pipeline::FittedPatch& p = run.fit.fitted.patches.at(0);
+  REQUIRE(p.earlier_passes.size() == 1);
+  const pipeline::PassMotion& rough = p.earlier_passes[0];
+  // The earlier pass stands 0.3 mm farther from the design surface, pose by pose (same tool).
+  const SurfaceIndex design(run.fit.fitted.surface.mesh);
+  const double half = 0.5 * p.assembly.cutter_length();
+  REQUIRE(rough.poses.size() == p.poses.size());
+  double worst = 0;
+  for (size_t i = 0; i < p.poses.size(); ++i) {
+    const double d_final = design.closest(p.poses[i].tip + half * p.poses[i].axis).distance;
+    const double d_rough = design.closest(rough.poses[i].tip + half * rough.poses[i].axis).distance;
+    worst = std::max(worst, std::abs(d_rough - d_final - 0.3));
+  }
+  MESSAGE("pass 1 (allowance 0.3): eps " << rough.eps_mm << " mm, coverage " << rough.coverage << "; final pass eps "
+                                         << run.fit.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max) << " mm; offset error "
+                                         << worst << " mm");
+  CHECK(worst < 0.015);
+  // One program for the patch with two sections, the 0.3 mm pass first.
+  int programs = 0;
+  for (const pipeline::PostedProgram& w : run.programs) {
+    if (w.patch != "two-pass") continue;
+    ++programs;
+    REQUIRE(w.posted.sections.size() == 2);
+    CHECK(w.posted.sections[0].first_block < w.posted.sections[1].first_block);
+    const std::string text = nc_text(w.posted.program, {w.dialect, false, 0.005});
+    const size_t rough_at = text.find("ALLOWANCE 0.3"), finish_at = text.find("FLANKCAM FIT OF");
+    REQUIRE(rough_at != std::string::npos);
+    REQUIRE(finish_at != std::string::npos);
+    CHECK(rough_at < finish_at);
+    CHECK(count_m6(text) == 1);
+  }
+  CHECK(programs == 1);
+  const nlohmann::ordered_json r = pipeline::patch_report(run.fit.job, run.fit.fitted, p);
+  REQUIRE(r["passes"].size() == 2);
+  CHECK(r["passes"][0]["allowance_mm"] == 0.3);
+  CHECK(r["passes"][1]["allowance_mm"] == 0);
 }
