@@ -57,6 +57,8 @@ std::string FitOptions::validate() const {
   if (!(stall >= 0)) return "stall: must be >= 0";
   if (!(motion_tolerance >= 0) || !std::isfinite(motion_tolerance)) return "motion_tolerance: must be finite and >= 0";
   if (!(robust_scale >= 0) || !std::isfinite(robust_scale)) return "robust_scale: must be finite and >= 0";
+  if (!(w_constraint >= 0) || !std::isfinite(w_constraint)) return "w_constraint: must be finite and >= 0";
+  if (auto err = constraints.validate(); !err.empty()) return err;
   if (threads < 1) return "threads: at least 1";
   return {};
 }
