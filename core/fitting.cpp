@@ -572,56 +572,56 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
     ceres::CauchyLoss robust(w_plane * o.robust_scale);
     ceres::LossFunction* loss = o.robust_scale > 0 ? &robust : nullptr;
     for (size_t p = 0; p < P; ++p) {
-    std::vector<double>& A = As[p];
-    std::vector<double>& B = Bs[p];
-    const Rails& rails = st.rails[p];
-    const double L = rails.length;
-    const auto fps = sample_footpoints(*surfaces[p], rails, m, n);
-    for (int i = 0; i < m; ++i) {
-      const BasisRow& row = rows[size_t(i)];
-      std::vector<double*> blocks;
-      for (int k = 0; k < 4; ++k) blocks.push_back(&A[size_t(3 * (row.first + k))]);
-      for (int k = 0; k < 4; ++k) blocks.push_back(&B[size_t(3 * (row.first + k))]);
-      blocks.push_back(D.data());
-      for (int j = 0; j < n; ++j) {
-        const Footpoint& f = fps[size_t(i) * n + j];
-        const double s = double(j) / (n - 1);
-        const auto plane = sample_plane(rails.point(double(i) / (m - 1), s), f);
-        if (!plane) continue;  // the axis point is beyond Φ's boundary: no data there
-        const Eigen::Vector3d nrm = *plane;
-        planes.push_back({p, i, j, nrm});
-        problem.AddResidualBlock(new SampleResidual(row, s, f.point, nrm, tool_basis[size_t(j)], w_plane, w_point),
-                                 loss, blocks);
-      }
-      // F_rigid, eq. (9), soft.
-      if (o.w_rigid > 0)
-        problem.AddResidualBlock(new RigidResidual(row, L, std::sqrt(o.w_rigid / m)), nullptr,
-                                 std::vector<double*>(blocks.begin(), blocks.begin() + 8));
-    }
-    // F_fair, eq. (11): second differences of a(t_i) and b(t_i).
-    if (o.w_fair > 0) {
-      const double w = std::sqrt(o.w_fair / m);
-      for (int i = 1; i + 1 < m; ++i) {
-        Eigen::RowVectorXd coef = Eigen::RowVectorXd::Zero(Nc);
-        for (int di = -1; di <= 1; ++di) {
-          const BasisRow& r = rows[size_t(i + di)];
-          for (int k = 0; k < 4; ++k) coef[r.first + k] += (di == 0 ? -2.0 : 1.0) * r.w[k];
+      std::vector<double>& A = As[p];
+      std::vector<double>& B = Bs[p];
+      const Rails& rails = st.rails[p];
+      const double L = rails.length;
+      const auto fps = sample_footpoints(*surfaces[p], rails, m, n);
+      for (int i = 0; i < m; ++i) {
+        const BasisRow& row = rows[size_t(i)];
+        std::vector<double*> blocks;
+        for (int k = 0; k < 4; ++k) blocks.push_back(&A[size_t(3 * (row.first + k))]);
+        for (int k = 0; k < 4; ++k) blocks.push_back(&B[size_t(3 * (row.first + k))]);
+        blocks.push_back(D.data());
+        for (int j = 0; j < n; ++j) {
+          const Footpoint& f = fps[size_t(i) * n + j];
+          const double s = double(j) / (n - 1);
+          const auto plane = sample_plane(rails.point(double(i) / (m - 1), s), f);
+          if (!plane) continue;  // the axis point is beyond Φ's boundary: no data there
+          const Eigen::Vector3d nrm = *plane;
+          planes.push_back({p, i, j, nrm});
+          problem.AddResidualBlock(new SampleResidual(row, s, f.point, nrm, tool_basis[size_t(j)], w_plane, w_point),
+                                   loss, blocks);
         }
-        for (std::vector<double>* X : {&A, &B}) {
-          std::vector<Eigen::MatrixXd> J;
-          std::vector<double*> blocks;
-          Eigen::Vector3d start = Eigen::Vector3d::Zero();  // second difference at the start of this round
-          for (int k = 0; k < Nc; ++k)
-            if (coef[k] != 0) {
-              J.push_back(w * coef[k] * Eigen::Matrix3d::Identity());
-              blocks.push_back(&(*X)[size_t(3 * k)]);
-              start += w * coef[k] * Eigen::Map<const Eigen::Vector3d>(&(*X)[size_t(3 * k)]);
-            }
-          const Eigen::Vector3d rhs = o.fair_update ? start : Eigen::Vector3d::Zero();
-          problem.AddResidualBlock(new LinearResidual(std::move(J), rhs), nullptr, blocks);
+        // F_rigid, eq. (9), soft.
+        if (o.w_rigid > 0)
+          problem.AddResidualBlock(new RigidResidual(row, L, std::sqrt(o.w_rigid / m)), nullptr,
+                                   std::vector<double*>(blocks.begin(), blocks.begin() + 8));
+      }
+      // F_fair, eq. (11): second differences of a(t_i) and b(t_i).
+      if (o.w_fair > 0) {
+        const double w = std::sqrt(o.w_fair / m);
+        for (int i = 1; i + 1 < m; ++i) {
+          Eigen::RowVectorXd coef = Eigen::RowVectorXd::Zero(Nc);
+          for (int di = -1; di <= 1; ++di) {
+            const BasisRow& r = rows[size_t(i + di)];
+            for (int k = 0; k < 4; ++k) coef[r.first + k] += (di == 0 ? -2.0 : 1.0) * r.w[k];
+          }
+          for (std::vector<double>* X : {&A, &B}) {
+            std::vector<Eigen::MatrixXd> J;
+            std::vector<double*> blocks;
+            Eigen::Vector3d start = Eigen::Vector3d::Zero();  // second difference at the start of this round
+            for (int k = 0; k < Nc; ++k)
+              if (coef[k] != 0) {
+                J.push_back(w * coef[k] * Eigen::Matrix3d::Identity());
+                blocks.push_back(&(*X)[size_t(3 * k)]);
+                start += w * coef[k] * Eigen::Map<const Eigen::Vector3d>(&(*X)[size_t(3 * k)]);
+              }
+            const Eigen::Vector3d rhs = o.fair_update ? start : Eigen::Vector3d::Zero();
+            problem.AddResidualBlock(new LinearResidual(std::move(J), rhs), nullptr, blocks);
+          }
         }
       }
-    }
     }  // patches
     // Anchor of the tool radii (not in the paper): on nearly developable surfaces a shift of the axis
     // along the surface normal with an equal change of every d_j leaves the envelope almost unchanged,
