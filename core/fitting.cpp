@@ -57,6 +57,8 @@ std::string FitOptions::validate() const {
   if (!(stall >= 0)) return "stall: must be >= 0";
   if (!(motion_tolerance >= 0) || !std::isfinite(motion_tolerance)) return "motion_tolerance: must be finite and >= 0";
   if (!(robust_scale >= 0) || !std::isfinite(robust_scale)) return "robust_scale: must be finite and >= 0";
+  if (!(w_constraint >= 0) || !std::isfinite(w_constraint)) return "w_constraint: must be finite and >= 0";
+  if (auto err = constraints.validate(); !err.empty()) return err;
   if (threads < 1) return "threads: at least 1";
   return {};
 }
@@ -318,36 +320,247 @@ ErrorStats sample_error(const SurfaceIndex& surface, const Rails& rails, const T
   return e;
 }
 
-FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, const FitOptions& o) {
-  if (auto err = o.validate(); !err.empty()) throw InputError(err);
-  const int m = o.samples_t, n = o.samples_s, Nc = o.rail_control_points;
-  FitResult result;
-  result.rails = initial;
-  if (initial.a.size() != Nc || initial.b.size() != Nc)
-    throw InputError("optimize_motion: rails must have rail_control_points control points");
-  result.tool = initial_tool(surface, initial, o);
-  const ToolRadius anchor_tool = result.tool;
-  result.eps_ini = sample_error(surface, initial, result.tool, o);
-  const double L = initial.length;
+bool ToolConstraints::active() const {
+  return min_radius > 0 || std::isfinite(max_radius) || std::isfinite(max_length) || min_tip_radius > 0 ||
+         max_cone_angle_rad < M_PI / 2 || convex;
+}
 
+std::string ToolConstraints::validate() const {
+  if (!(min_radius >= 0) || !std::isfinite(min_radius)) return "tool.min_diameter: must be finite and >= 0";
+  if (!(max_radius > 0)) return "tool.max_diameter: must be > 0";
+  if (!(min_tip_radius >= 0) || !std::isfinite(min_tip_radius)) return "tool.min_tip_diameter: must be finite and >= 0";
+  if (!(max_length > 0)) return "tool.max_length: must be > 0";
+  if (!(max_cone_angle_rad >= 0 && max_cone_angle_rad <= M_PI / 2)) return "tool.max_cone_angle: must be in 0 .. 90 deg";
+  if (min_radius > max_radius) return "tool.min_diameter: larger than tool.max_diameter";
+  if (min_tip_radius > max_radius) return "tool.min_tip_diameter: larger than tool.max_diameter";
+  return {};
+}
+
+namespace {
+// Q with (Q D)_k the control values of d_s(s) (derivative with respect to s): general tools
+// 3 (D_{k+1} - D_k) / (u_{k+4} - u_{k+1}) over the clamped uniform knots; cones D_1 - D_0;
+// cylinders none. d_s lies within their range (convex hull), so bounds on them bound the slope.
+Eigen::MatrixXd slope_matrix(const ToolRadius& tool) {
+  const int K = int(tool.D.size());
+  if (tool.shape == ToolShape::Cylinder) return Eigen::MatrixXd(0, K);
+  if (tool.shape == ToolShape::Cone) return (Eigen::MatrixXd(1, 2) << -1, 1).finished();
+  const auto knot = [&](int j) { return std::clamp(double(j - 3) / (K - 3), 0.0, 1.0); };
+  Eigen::MatrixXd Q = Eigen::MatrixXd::Zero(K - 1, K);
+  for (int k = 0; k + 1 < K; ++k) {
+    const double f = 3 / (knot(k + 4) - knot(k + 1));
+    Q(k, k) = -f, Q(k, k + 1) = f;
+  }
+  return Q;
+}
+
+// Hildreth's dual coordinate ascent: the nearest x to x0 with G x <= h (a convex QP with few rows).
+Eigen::VectorXd project(const Eigen::VectorXd& x0, const Eigen::MatrixXd& G, const Eigen::VectorXd& h) {
+  Eigen::VectorXd x = x0, lambda = Eigen::VectorXd::Zero(h.size());
+  for (int sweep = 0; sweep < 200000; ++sweep) {
+    double worst = 0;
+    for (Eigen::Index k = 0; k < h.size(); ++k) {
+      const double gg = G.row(k).squaredNorm();
+      if (!(gg > 0)) continue;
+      const double g = G.row(k).dot(x) - h[k];
+      worst = std::max(worst, g);
+      const double next = std::max(0.0, lambda[k] + g / gg);
+      x -= (next - lambda[k]) * G.row(k).transpose();
+      lambda[k] = next;
+    }
+    if (worst <= 1e-14) break;
+  }
+  return x;
+}
+}  // namespace
+
+ConstraintRows constraint_rows(const ToolRadius& tool, double L, const ToolConstraints& c) {
+  const int K = int(tool.D.size());
+  const Eigen::MatrixXd Q = slope_matrix(tool);
+  const Eigen::VectorXd D = Eigen::Map<const Eigen::VectorXd>(tool.D.data(), K);
+  // Slope bound k >= |d'(z)| = |d_s| / L of the result: the cone angle's sine, and where radii r =
+  // d sqrt(1 - k^2) are bounded below, also the current slope (+5%) so that d >= r_min / sqrt(1 - k^2)
+  // is a sufficient bound, and small enough that this lower bound stays below max_radius.
+  double k = std::sin(c.max_cone_angle_rad);
+  const bool lower = c.min_radius > 0 || c.min_tip_radius > 0;
+  if (lower) {
+    const double now = Q.rows() > 0 ? (Q * D).cwiseAbs().maxCoeff() / L : 0.0;
+    k = std::min({k, std::max(1.05 * now, 0.02), 0.99});
+    if (std::isfinite(c.max_radius)) {
+      const double r = std::max(c.min_radius, c.min_tip_radius) / c.max_radius;
+      k = std::min(k, std::sqrt(std::max(0.0, 1 - r * r)));
+    }
+  }
+  std::vector<Eigen::RowVectorXd> G;
+  std::vector<double> h;
+  const auto row = [&](Eigen::RowVectorXd g, double bound) {
+    G.push_back(std::move(g));
+    h.push_back(bound);
+  };
+  const double cosk = std::sqrt(std::max(1e-12, 1 - k * k));
+  for (int i = 0; i < K; ++i) {  // d(s) lies between the smallest and largest D_k (convex hull)
+    const Eigen::RowVectorXd e = Eigen::RowVectorXd::Unit(K, i);
+    if (c.min_radius > 0) row(-e, -c.min_radius / cosk);
+    if (std::isfinite(c.max_radius)) row(e, c.max_radius);
+  }
+  if (c.min_tip_radius > 0) row(-Eigen::RowVectorXd::Unit(K, 0), -c.min_tip_radius / cosk);  // d(0) = D_0
+  if (k < 1)
+    for (Eigen::Index i = 0; i < Q.rows(); ++i) row(Q.row(i), L * k), row(-Q.row(i), L * k);
+  if (c.convex)  // d_s non-increasing: d concave, no waist
+    for (Eigen::Index i = 0; i + 1 < Q.rows(); ++i) row(Q.row(i + 1) - Q.row(i), 0.0);
+  ConstraintRows out{Eigen::MatrixXd(Eigen::Index(G.size()), K), Eigen::VectorXd(Eigen::Index(h.size()))};
+  for (size_t i = 0; i < G.size(); ++i) out.G.row(Eigen::Index(i)) = G[i], out.h[Eigen::Index(i)] = h[i];
+  return out;
+}
+
+ToolRadius constrained_tool(const ToolRadius& tool, double L, const ToolConstraints& c) {
+  if (!c.active()) return tool;
+  if (auto err = c.validate(); !err.empty()) throw InputError(err);
+  const ConstraintRows rows = constraint_rows(tool, L, c);
+  ToolRadius out = tool;
+  if (rows.h.size() == 0) return out;
+  const Eigen::VectorXd x = project(Eigen::Map<const Eigen::VectorXd>(tool.D.data(), Eigen::Index(tool.D.size())), rows.G, rows.h);
+  out.D.assign(x.data(), x.data() + x.size());
+  return out;
+}
+
+ConstraintCheck check_constraints(const ToolRadius& tool, double L, const ToolConstraints& c) {
+  const std::vector<Eigen::Vector2d> mer = meridian(tool, L, 121);
+  ConstraintCheck out;
+  const auto note = [&](double v, const char* what) {
+    if (v > out.violation) out.violation = v, out.what = what;
+  };
+  double rmin = INFINITY, rmax = 0;
+  for (const auto& p : mer) rmin = std::min(rmin, p.y()), rmax = std::max(rmax, p.y());
+  note(c.min_radius - rmin, "min_diameter");
+  note(rmax - c.max_radius, "max_diameter");
+  note(c.min_tip_radius - mer.front().y(), "min_tip_diameter");
+  note(mer.back().x() - std::min(0.0, mer.front().x()) - c.max_length, "max_length");
+  for (size_t i = 1; i < mer.size(); ++i)
+    note(std::atan2(std::abs(mer[i].y() - mer[i - 1].y()), mer[i].x() - mer[i - 1].x()) - c.max_cone_angle_rad, "max_cone_angle");
+  if (c.convex) {  // a waist: a point lower than the highest points on both sides of it
+    std::vector<double> left(mer.size()), right(mer.size());
+    for (size_t i = 0; i < mer.size(); ++i) left[i] = std::max(i ? left[i - 1] : 0.0, mer[i].y());
+    for (size_t i = mer.size(); i-- > 0;) right[i] = std::max(i + 1 < mer.size() ? right[i + 1] : 0.0, mer[i].y());
+    for (size_t i = 1; i + 1 < mer.size(); ++i) note(std::min(left[i - 1], right[i + 1]) - mer[i].y(), "convex");
+  }
+  return out;
+}
+
+ToolRadius tool_from_meridian(const std::vector<Eigen::Vector2d>& zr, int K) {
+  if (zr.size() < 2 || !(zr.back().x() > zr.front().x())) throw InputError("tool meridian: at least 2 points with z increasing");
+  if (K < 4) throw InputError("tool meridian: at least 4 control points");
+  const double z0 = zr.front().x(), L = zr.back().x() - z0;
+  // The meridian continued along its end tangents, so that spheres near the ends touch the flank
+  // (not the corner where the end face begins): a taper gives an exactly linear d.
+  std::vector<Eigen::Vector2d> curve;
+  curve.push_back(zr[0] - L * (zr[1] - zr[0]).normalized());
+  curve.insert(curve.end(), zr.begin(), zr.end());
+  curve.push_back(zr.back() + L * (zr.back() - zr[zr.size() - 2]).normalized());
+  const int samples = std::max(8 * K, 200);
+  Eigen::MatrixXd d(samples, 1);
+  std::vector<double> ss = uniform_parameters(samples);
+  for (int j = 0; j < samples; ++j) {
+    const Eigen::Vector2d c(z0 + ss[size_t(j)] * L, 0);
+    double best = INFINITY;
+    for (size_t k = 1; k < curve.size(); ++k) {
+      const Eigen::Vector2d u = curve[k] - curve[k - 1];
+      const double t = std::clamp((c - curve[k - 1]).dot(u) / u.squaredNorm(), 0.0, 1.0);
+      best = std::min(best, (curve[k - 1] + t * u - c).norm());
+    }
+    d(j, 0) = best;
+  }
+  const BSpline spline = fit_bspline(d, ss, K, 0.0);
+  ToolRadius tool;
+  tool.shape = ToolShape::General;
+  tool.D.assign(spline.ctrl.data(), spline.ctrl.data() + K);
+  return tool;
+}
+
+Rails with_length(const Rails& r, double length) {
+  Rails out = r;
+  const double f = length / r.length;
+  out.b.ctrl = r.a.ctrl + f * (r.b.ctrl - r.a.ctrl);  // R'(t, s) = R(t, f s): the same ruled surface
+  out.length = length;
+  return out;
+}
+
+ToolRadius shared_radii(const std::vector<const SurfaceIndex*>& surfaces, const std::vector<Rails>& rails,
+                        const FitOptions& o) {
+  if (surfaces.size() != rails.size() || rails.empty()) throw InputError("shared tool: one surface per motion");
+  const int m = o.samples_t, n = o.samples_s;
+  // Mean distance per axis sample s_j over every motion's interior samples, then least squares D.
+  std::vector<double> sum(size_t(n), 0.0);
+  std::vector<int> count(size_t(n), 0);
+  for (size_t p = 0; p < rails.size(); ++p) {
+    const auto fps = sample_footpoints(*surfaces[p], rails[p], m, n);
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; j < n; ++j) {
+        const Footpoint& f = fps[size_t(i) * n + j];
+        if (f.on_boundary) continue;
+        sum[size_t(j)] += f.distance;
+        ++count[size_t(j)];
+      }
+  }
+  ToolRadius tool;
+  tool.shape = o.shape;
+  const int K = shape_parameters(o.shape, o);
+  tool.D.assign(size_t(K), 0.0);
+  std::vector<Eigen::RowVectorXd> rows;
+  std::vector<double> rhs;
+  for (int j = 0; j < n; ++j) {
+    if (!count[size_t(j)]) continue;
+    const double w = std::sqrt(double(count[size_t(j)]));
+    const std::vector<double> c = tool.basis(double(j) / (n - 1));
+    rows.push_back(w * Eigen::Map<const Eigen::RowVectorXd>(c.data(), K));
+    rhs.push_back(w * sum[size_t(j)] / count[size_t(j)]);
+  }
+  if (rows.size() < size_t(K)) throw InputError("shared tool: the motions are not over the design surface");
+  Eigen::MatrixXd C(Eigen::Index(rows.size()), K);
+  Eigen::VectorXd b(Eigen::Index(rows.size()));
+  for (size_t k = 0; k < rows.size(); ++k) C.row(Eigen::Index(k)) = rows[k], b[Eigen::Index(k)] = rhs[k];
+  const Eigen::VectorXd D = C.colPivHouseholderQr().solve(b);
+  tool.D.assign(D.data(), D.data() + K);
+  return constrained_tool(tool, rails.front().length, o.constraints);
+}
+
+
+namespace {
+// A fit in progress: one or several motions (patches) sharing one tool.
+struct Joint {
+  std::vector<Rails> rails;
+  ToolRadius tool;
+  FitStatus status = FitStatus::IterationLimit;
+  std::string message;
+  std::vector<double> objective;  // F_motion after each round
+  int iterations = 0;
+};
+
+// Outer rounds (footpoints recomputed, then one solve) of eq. (12) summed over every motion of `st`
+// with one set of radii; radii_free: d are unknowns (eq. 12) or held. `anchor_tool`: see w_anchor.
+Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, const FitOptions& o, bool radii_free,
+                 const ToolRadius& anchor_tool, int max_rounds) {
+  const int m = o.samples_t, n = o.samples_s, Nc = o.rail_control_points;
+  const size_t P = st.rails.size();
   std::vector<BasisRow> rows(static_cast<size_t>(m));
   for (int i = 0; i < m; ++i) rows[size_t(i)] = bspline_basis(Nc, double(i) / (m - 1));
   std::vector<std::vector<double>> tool_basis(static_cast<size_t>(n));
-  for (int j = 0; j < n; ++j) tool_basis[size_t(j)] = result.tool.basis(double(j) / (n - 1));
-  const int K = int(result.tool.D.size());
-
-  for (int iter = 0; iter < o.max_iterations; ++iter) {
-    // Unknowns: control points of a(t), b(t) and the radius parameters D.
-    std::vector<double> A(size_t(3 * Nc)), B(size_t(3 * Nc));
-    for (int k = 0; k < Nc; ++k)
-      for (int c = 0; c < 3; ++c) {
-        A[size_t(3 * k + c)] = result.rails.a.ctrl(k, c);
-        B[size_t(3 * k + c)] = result.rails.b.ctrl(k, c);
-      }
-    std::vector<double> D = result.tool.D;
-    const auto fps = sample_footpoints(surface, result.rails, m, n);
+  for (int j = 0; j < n; ++j) tool_basis[size_t(j)] = st.tool.basis(double(j) / (n - 1));
+  const int K = int(st.tool.D.size());
+  const bool constrained = radii_free && o.constraints.active();
+  st.status = FitStatus::IterationLimit;
+  for (int iter = 0; iter < max_rounds; ++iter) {
+    // Unknowns: control points of every a(t), b(t) and the radius parameters D.
+    std::vector<std::vector<double>> As(P, std::vector<double>(size_t(3 * Nc))), Bs = As;
+    for (size_t p = 0; p < P; ++p)
+      for (int k = 0; k < Nc; ++k)
+        for (int c = 0; c < 3; ++c) {
+          As[p][size_t(3 * k + c)] = st.rails[p].a.ctrl(k, c);
+          Bs[p][size_t(3 * k + c)] = st.rails[p].b.ctrl(k, c);
+        }
+    std::vector<double> D = st.tool.D;
 
     struct SamplePlane {
+      size_t p;
       int i, j;
       Eigen::Vector3d n;
     };
@@ -358,56 +571,62 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     const double w_plane = std::sqrt(o.w_plane / (double(m) * n)), w_point = std::sqrt(o.w_point / (double(m) * n));
     ceres::CauchyLoss robust(w_plane * o.robust_scale);
     ceres::LossFunction* loss = o.robust_scale > 0 ? &robust : nullptr;
-    for (int i = 0; i < m; ++i) {
-      const BasisRow& row = rows[size_t(i)];
-      std::vector<double*> blocks;
-      for (int k = 0; k < 4; ++k) blocks.push_back(&A[size_t(3 * (row.first + k))]);
-      for (int k = 0; k < 4; ++k) blocks.push_back(&B[size_t(3 * (row.first + k))]);
-      blocks.push_back(D.data());
-      for (int j = 0; j < n; ++j) {
-        const Footpoint& f = fps[size_t(i) * n + j];
-        const double s = double(j) / (n - 1);
-        const Eigen::Vector3d p = result.rails.point(double(i) / (m - 1), s);
-        const auto plane = sample_plane(p, f);
-        if (!plane) continue;  // the axis point is beyond Φ's boundary: no data there
-        const Eigen::Vector3d nrm = *plane;
-        planes.push_back({i, j, nrm});
-        problem.AddResidualBlock(new SampleResidual(row, s, f.point, nrm, tool_basis[size_t(j)], w_plane, w_point),
-                                 loss, blocks);
-      }
-      // F_rigid, eq. (9), soft.
-      if (o.w_rigid > 0)
-        problem.AddResidualBlock(new RigidResidual(row, L, std::sqrt(o.w_rigid / m)), nullptr,
-                                 std::vector<double*>(blocks.begin(), blocks.begin() + 8));
-    }
-    // F_fair, eq. (11): second differences of a(t_i) and b(t_i).
-    if (o.w_fair > 0) {
-      const double w = std::sqrt(o.w_fair / m);
-      for (int i = 1; i + 1 < m; ++i) {
-        Eigen::RowVectorXd coef = Eigen::RowVectorXd::Zero(Nc);
-        for (int di = -1; di <= 1; ++di) {
-          const BasisRow& r = rows[size_t(i + di)];
-          for (int k = 0; k < 4; ++k) coef[r.first + k] += (di == 0 ? -2.0 : 1.0) * r.w[k];
+    for (size_t p = 0; p < P; ++p) {
+      std::vector<double>& A = As[p];
+      std::vector<double>& B = Bs[p];
+      const Rails& rails = st.rails[p];
+      const double L = rails.length;
+      const auto fps = sample_footpoints(*surfaces[p], rails, m, n);
+      for (int i = 0; i < m; ++i) {
+        const BasisRow& row = rows[size_t(i)];
+        std::vector<double*> blocks;
+        for (int k = 0; k < 4; ++k) blocks.push_back(&A[size_t(3 * (row.first + k))]);
+        for (int k = 0; k < 4; ++k) blocks.push_back(&B[size_t(3 * (row.first + k))]);
+        blocks.push_back(D.data());
+        for (int j = 0; j < n; ++j) {
+          const Footpoint& f = fps[size_t(i) * n + j];
+          const double s = double(j) / (n - 1);
+          const auto plane = sample_plane(rails.point(double(i) / (m - 1), s), f);
+          if (!plane) continue;  // the axis point is beyond Φ's boundary: no data there
+          const Eigen::Vector3d nrm = *plane;
+          planes.push_back({p, i, j, nrm});
+          problem.AddResidualBlock(new SampleResidual(row, s, f.point, nrm, tool_basis[size_t(j)], w_plane, w_point),
+                                   loss, blocks);
         }
-        for (std::vector<double>* X : {&A, &B}) {
-          std::vector<Eigen::MatrixXd> J;
-          std::vector<double*> blocks;
-          Eigen::Vector3d start = Eigen::Vector3d::Zero();  // second difference at the start of this round
-          for (int k = 0; k < Nc; ++k)
-            if (coef[k] != 0) {
-              J.push_back(w * coef[k] * Eigen::Matrix3d::Identity());
-              blocks.push_back(&(*X)[size_t(3 * k)]);
-              start += w * coef[k] * Eigen::Map<const Eigen::Vector3d>(&(*X)[size_t(3 * k)]);
-            }
-          const Eigen::Vector3d rhs = o.fair_update ? start : Eigen::Vector3d::Zero();
-          problem.AddResidualBlock(new LinearResidual(std::move(J), rhs), nullptr, blocks);
+        // F_rigid, eq. (9), soft.
+        if (o.w_rigid > 0)
+          problem.AddResidualBlock(new RigidResidual(row, L, std::sqrt(o.w_rigid / m)), nullptr,
+                                   std::vector<double*>(blocks.begin(), blocks.begin() + 8));
+      }
+      // F_fair, eq. (11): second differences of a(t_i) and b(t_i).
+      if (o.w_fair > 0) {
+        const double w = std::sqrt(o.w_fair / m);
+        for (int i = 1; i + 1 < m; ++i) {
+          Eigen::RowVectorXd coef = Eigen::RowVectorXd::Zero(Nc);
+          for (int di = -1; di <= 1; ++di) {
+            const BasisRow& r = rows[size_t(i + di)];
+            for (int k = 0; k < 4; ++k) coef[r.first + k] += (di == 0 ? -2.0 : 1.0) * r.w[k];
+          }
+          for (std::vector<double>* X : {&A, &B}) {
+            std::vector<Eigen::MatrixXd> J;
+            std::vector<double*> blocks;
+            Eigen::Vector3d start = Eigen::Vector3d::Zero();  // second difference at the start of this round
+            for (int k = 0; k < Nc; ++k)
+              if (coef[k] != 0) {
+                J.push_back(w * coef[k] * Eigen::Matrix3d::Identity());
+                blocks.push_back(&(*X)[size_t(3 * k)]);
+                start += w * coef[k] * Eigen::Map<const Eigen::Vector3d>(&(*X)[size_t(3 * k)]);
+              }
+            const Eigen::Vector3d rhs = o.fair_update ? start : Eigen::Vector3d::Zero();
+            problem.AddResidualBlock(new LinearResidual(std::move(J), rhs), nullptr, blocks);
+          }
         }
       }
-    }
+    }  // patches
     // Anchor of the tool radii (not in the paper): on nearly developable surfaces a shift of the axis
     // along the surface normal with an equal change of every d_j leaves the envelope almost unchanged,
     // so the radii are barely determined by Φ. A weak pull to the initial meridian fixes that mode.
-    if (o.w_anchor > 0) {
+    if (radii_free && o.w_anchor > 0) {
       const double w = std::sqrt(o.w_anchor / n);
       Eigen::MatrixXd C(n, K);
       Eigen::VectorXd target(n);
@@ -417,6 +636,13 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
       }
       problem.AddResidualBlock(new LinearResidual({C}, target), nullptr, D.data());
     }
+    // Tool constraints (Sec. 4.6) as one-sided penalties on the radii; the projection after the
+    // joint rounds makes them exact.
+    if (constrained) {
+      const ConstraintRows c = constraint_rows(st.tool, st.rails.front().length, o.constraints);
+      if (c.h.size() > 0) problem.AddResidualBlock(new fit_residuals::HingeResidual(c.G, c.h, o.w_constraint), nullptr, D.data());
+    }
+    if (!radii_free) problem.SetParameterBlockConstant(D.data());
     ceres::Solver::Options so;
     // Each sample touches 8 of the 2 x rail_control_points control points and the radii: J^T J is
     // sparse (about a third of the dense matrix is non-zero at 16 control points), and the sparse
@@ -436,8 +662,8 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     // NO_CONVERGENCE only means the round used its solver_iterations; FAILURE (or a cost that is
     // not finite) is a result, not an exception: the last good motion is kept and reported.
     if (fit_residuals::solve_failed(summary)) {
-      result.status = FitStatus::SolverFailed;
-      result.message = "Ceres: " + summary.message;
+      st.status = FitStatus::SolverFailed;
+      st.message = "Ceres: " + summary.message;
       break;
     }
 
@@ -445,38 +671,114 @@ FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, con
     // normal of the axis point minus the change of its radius (unit frame). A drift of the axis
     // along the normal with an equal change of the radii (nearly free on developable surfaces,
     // see w_anchor) does not move the envelope and does not count.
-    Rails next = result.rails;
-    for (int k = 0; k < Nc; ++k)
-      for (int c = 0; c < 3; ++c) {
-        next.a.ctrl(k, c) = A[size_t(3 * k + c)];
-        next.b.ctrl(k, c) = B[size_t(3 * k + c)];
-      }
-    ToolRadius next_tool = result.tool;
+    std::vector<Rails> next = st.rails;
+    for (size_t p = 0; p < P; ++p)
+      for (int k = 0; k < Nc; ++k)
+        for (int c = 0; c < 3; ++c) {
+          next[p].a.ctrl(k, c) = As[p][size_t(3 * k + c)];
+          next[p].b.ctrl(k, c) = Bs[p][size_t(3 * k + c)];
+        }
+    ToolRadius next_tool = st.tool;
     next_tool.D = D;
     double moved = 0;
     for (const SamplePlane& sp : planes) {
       const double t = double(sp.i) / (m - 1), s = double(sp.j) / (n - 1);
-      moved = std::max(moved, std::abs((next.point(t, s) - result.rails.point(t, s)).dot(sp.n) -
-                                       (next_tool.d(s) - result.tool.d(s))));
+      moved = std::max(moved, std::abs((next[sp.p].point(t, s) - st.rails[sp.p].point(t, s)).dot(sp.n) -
+                                       (next_tool.d(s) - st.tool.d(s))));
     }
-    result.rails = std::move(next);
-    result.tool = std::move(next_tool);
+    st.rails = std::move(next);
+    st.tool = std::move(next_tool);
     const double objective = 2 * summary.final_cost;  // F_motion, eq. (12)
-    result.objective.push_back(objective);
-    result.iterations = iter + 1;
-    if (o.on_iteration) o.on_iteration(result.iterations, objective);
+    st.objective.push_back(objective);
+    st.iterations += 1;
+    if (o.on_iteration) o.on_iteration(st.iterations, objective);
     // Converged when the motion and the radii stop moving, or when a round cannot lower its own
     // objective (the footpoints, and which samples lie beyond Φ, change between solves, so
     // progress is judged within a solve).
     if (objective <= 0 || moved <= o.motion_tolerance ||
         summary.initial_cost - summary.final_cost < o.stall * summary.initial_cost) {
-      result.status = FitStatus::Converged;
+      st.status = FitStatus::Converged;
       break;
     }
+  }
+  return st;
+}
+}  // namespace
+
+FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, const FitOptions& o) {
+  if (auto err = o.validate(); !err.empty()) throw InputError(err);
+  const int Nc = o.rail_control_points;
+  FitResult result;
+  result.rails = initial;
+  if (initial.a.size() != Nc || initial.b.size() != Nc)
+    throw InputError("optimize_motion: rails must have rail_control_points control points");
+  const bool constrained = !o.fixed_tool && o.constraints.active();
+  // A tool no longer than max_length: the axis is shortened at the b end before the fit (the
+  // meridian's own overhang beyond the axis is corrected after it, below).
+  result.tool = o.fixed_tool ? *o.fixed_tool : initial_tool(surface, initial, o);
+  result.eps_ini = sample_error(surface, initial, result.tool, o);
+  if (constrained && result.rails.length > o.constraints.max_length) {
+    result.rails = with_length(result.rails, o.constraints.max_length);
+    result.tool = initial_tool(surface, result.rails, o);
+  }
+  if (constrained) result.tool = constrained_tool(result.tool, result.rails.length, o.constraints);
+  const ToolRadius anchor_tool = result.tool;
+
+  const std::vector<const SurfaceIndex*> surfaces{&surface};
+  const auto rounds = [&](bool radii_free, int max_rounds) {
+    Joint st{{result.rails}, result.tool, result.status, {}, std::move(result.objective), result.iterations};
+    st = fit_rounds(surfaces, std::move(st), o, radii_free, anchor_tool, max_rounds);
+    result.rails = std::move(st.rails.front());
+    result.tool = std::move(st.tool);
+    result.status = st.status;
+    result.message = std::move(st.message);
+    result.objective = std::move(st.objective);
+    result.iterations = st.iterations;
+  };
+  rounds(!o.fixed_tool, o.max_iterations);
+  // Constrained tools: the radii projected onto the constraints, then the motion fitted to that
+  // admissible tool with the radii held; a meridian that overhangs max_length shortens the axis.
+  for (int pass = 0; constrained && result.status != FitStatus::SolverFailed && pass < 4; ++pass) {
+    result.tool = constrained_tool(result.tool, result.rails.length, o.constraints);
+    rounds(false, o.max_iterations);
+    const std::vector<Eigen::Vector2d> mer = meridian(result.tool, result.rails.length, 121);
+    const double excess = mer.back().x() - std::min(0.0, mer.front().x()) - o.constraints.max_length;
+    if (!(excess > 0)) break;
+    result.rails = with_length(result.rails, result.rails.length - excess * 1.01 - 1e-9);
   }
   result.converged = result.status == FitStatus::Converged;
   result.eps_opt = sample_error(surface, result.rails, result.tool, o);
   return result;
+}
+
+std::vector<FitResult> fit_shared_tool(const std::vector<const SurfaceIndex*>& surfaces, std::vector<FitResult> fits,
+                                       double length, const FitOptions& o) {
+  if (surfaces.size() != fits.size() || fits.empty()) throw InputError("shared tool: one surface per patch");
+  if (auto err = o.validate(); !err.empty()) throw InputError(err);
+  Joint st;
+  for (FitResult& f : fits) st.rails.push_back(with_length(f.rails, length));
+  // Start: the meridian update over all patches (mean distances), then eq. (12) summed over the
+  // patches with their rails and the one set of radii as unknowns, as optimize_motion does for one.
+  st.tool = o.fixed_tool ? *o.fixed_tool : shared_radii(surfaces, st.rails, o);
+  const ToolRadius anchor = st.tool;
+  const bool constrained = !o.fixed_tool && o.constraints.active();
+  st = fit_rounds(surfaces, std::move(st), o, !o.fixed_tool, anchor, o.max_iterations);
+  if (constrained && st.status != FitStatus::SolverFailed) {
+    st.tool = constrained_tool(st.tool, length, o.constraints);
+    st = fit_rounds(surfaces, std::move(st), o, false, anchor, o.max_iterations);
+  }
+  for (size_t p = 0; p < fits.size(); ++p) {
+    FitResult& f = fits[p];
+    f.rails = st.rails[p];
+    f.tool = st.tool;
+    f.iterations += st.iterations;
+    f.objective = st.objective;
+    f.status = st.status;
+    f.converged = st.status == FitStatus::Converged;
+    f.message = st.message;
+    f.eps_opt = sample_error(*surfaces[p], f.rails, f.tool, o);
+  }
+  return fits;
 }
 
 }  // namespace flankcam

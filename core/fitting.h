@@ -4,7 +4,9 @@
 #pragma once
 #include <Eigen/Core>
 #include <array>
+#include <cmath>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -18,6 +20,32 @@ namespace flankcam {
 enum class ToolShape { General, Cone, Cylinder };
 [[nodiscard]] const char* to_string(ToolShape s);
 [[nodiscard]] ToolShape tool_shape_from_string(const std::string& s);  // throws InputError
+
+// Limits on a custom tool's shape (paper Sec. 4.6, "additional constraints on the meridian curve"),
+// unit frame like everything here. Enforced inside optimize_motion: the radius unknowns D get
+// one-sided penalties G D <= h in every solve, are projected onto {G D <= h} between solves, and
+// the motion is fitted once more with the projected (feasible) radii held fixed. Radii r are those
+// of the meridian (the planar envelope of the circles d(z), meridian()), not the sphere radii d.
+struct ToolConstraints {
+  double min_radius = 0;               // smallest meridian radius (min_diameter / 2)
+  double max_radius = INFINITY;        // largest meridian radius (max_diameter / 2)
+  double max_length = INFINITY;        // meridian length along the axis (tool_dimensions' length)
+  double min_tip_radius = 0;           // meridian radius at the tip end (s = 0)
+  double max_cone_angle_rad = M_PI / 2;  // steepest meridian half angle, |asin d'(z)|
+  bool convex = false;                 // d(s) concave: a meridian without a waist
+  [[nodiscard]] bool active() const;
+  std::string validate() const;        // empty when valid, else names the field
+};
+
+// Tool radii along the axis: d(s) = sum_k c_k(s) D_k, with c the shape's basis
+// (general: cubic spline with meridian_control_points values; cone: linear; cylinder: constant).
+struct ToolRadius {
+  ToolShape shape = ToolShape::General;
+  std::vector<double> D;  // parameters, unit frame
+  [[nodiscard]] std::vector<double> basis(double s) const;
+  [[nodiscard]] double d(double s) const;
+  [[nodiscard]] RadiusProfile profile() const;  // the same d(s) as a cubic B-spline
+};
 
 struct FitOptions {
   int samples_s = 30, samples_t = 100;                            // n x m samples of R(t, s) (paper: 30 x 100)
@@ -45,6 +73,12 @@ struct FitOptions {
   // envelope: on rotor 37 a scale of 1e-3 raised the worst overcut from 0.11 to 0.15 mm (1e-4: 0.43 mm)
   // while coverage rose from 61% to 62% (72%). 0: plain least squares, as in the paper.
   double robust_scale = 0;
+  ToolConstraints constraints;       // custom tools (not with fixed_tool)
+  // A tool from a catalogue (or shared by several patches): its radii are held constant and only
+  // the motion is fitted (the paper's optimisation without d as unknowns). Its shape replaces `shape`.
+  std::optional<ToolRadius> fixed_tool;
+  // Penalty weight of a violated constraint row in the solve (per unit of violation, unit frame).
+  double w_constraint = 100;
   int threads = 2;
   // Called after each outer iteration with its number (1-based) and F_motion; may be empty.
   std::function<void(int iteration, double objective)> on_iteration;
@@ -74,15 +108,6 @@ struct AxisLine {
 // Line-driven: the rails through the positions of a propagated line (Sec. 4.3).
 [[nodiscard]] Rails rails_from_trajectory(const LineTrajectory& trajectory, const FitOptions& options);
 
-// Tool radii along the axis: d(s) = sum_k c_k(s) D_k, with c the shape's basis
-// (general: cubic spline with meridian_control_points values; cone: linear; cylinder: constant).
-struct ToolRadius {
-  ToolShape shape = ToolShape::General;
-  std::vector<double> D;  // parameters, unit frame
-  [[nodiscard]] std::vector<double> basis(double s) const;
-  [[nodiscard]] double d(double s) const;
-  [[nodiscard]] RadiusProfile profile() const;  // the same d(s) as a cubic B-spline
-};
 
 struct ErrorStats {
   double max = 0, mean = 0;     // eq. (13) over the samples, unit frame (= relative to the diagonal)
@@ -103,6 +128,31 @@ struct ErrorStats {
 // envelope of the circles (z, d(z)); unit frame.
 [[nodiscard]] std::vector<Eigen::Vector2d> meridian(const ToolRadius& tool, double length, int points = 61);
 
+// The radii projected onto the constraints (least change of the parameters D): every row
+// of G D <= h below holds afterwards within 1e-12. `length` is the axis length L (unit frame).
+// Bounds on r are turned into bounds on d through the steepest slope the result may have.
+[[nodiscard]] ToolRadius constrained_tool(const ToolRadius& tool, double length, const ToolConstraints& c);
+// The constraint rows G D <= h for the current radii (the slope bound used for the r bounds is
+// taken from `tool`); exposed for tests.
+struct ConstraintRows {
+  Eigen::MatrixXd G;
+  Eigen::VectorXd h;
+};
+[[nodiscard]] ConstraintRows constraint_rows(const ToolRadius& tool, double length, const ToolConstraints& c);
+// The worst violation of the constraints by the tool's meridian (meridian(tool, length, 121)) and
+// its length: 0 when every constraint holds; names the constraint in `what`.
+struct ConstraintCheck {
+  double violation = 0;  // unit frame (radii, length) or radians (cone angle) or unit (waist depth)
+  std::string what;
+};
+[[nodiscard]] ConstraintCheck check_constraints(const ToolRadius& tool, double length, const ToolConstraints& c);
+
+// A fixed tool given by its meridian (z, r) from the tip (unit frame, z increasing): d(s) is the
+// radius of the largest sphere centred on the axis at z = s L inside the tool (the distance of the
+// axis point to the meridian), as a general spline with `control_points` values (Sec. 4.5's
+// footpoint construction applied to the tool itself). L: the meridian's z extent.
+[[nodiscard]] ToolRadius tool_from_meridian(const std::vector<Eigen::Vector2d>& zr, int control_points);
+
 enum class FitStatus {
   Converged,       // the motion and radii stopped moving, or a round could not lower F_motion
   IterationLimit,  // max_iterations outer rounds ran
@@ -120,7 +170,25 @@ struct FitResult {
   FitStatus status = FitStatus::IterationLimit;
   std::string message;  // why the solver failed (SolverFailed), else empty
 };
-// Joint optimisation of the rails and the radii (eqs. 8-12) from an initial motion.
+// Joint optimisation of the rails and the radii (eqs. 8-12) from an initial motion. With
+// options.fixed_tool only the rails (the initial length is replaced by none: use the tool's
+// own length for `initial`); with options.constraints the radii stay admissible (see
+// ToolConstraints) and a rails longer than constraints.max_length are shortened at the b end.
 [[nodiscard]] FitResult optimize_motion(const SurfaceIndex& surface, const Rails& initial, const FitOptions& options);
+
+// The rails with their b ends moved along the axis so that |b - a| = length (the tip end a kept).
+[[nodiscard]] Rails with_length(const Rails& rails, double length);
+
+// One tool for several motions (`tool: {shared: true}`): the meridian update of Sec. 4.5 over the
+// samples of every motion, d_j = least squares over all their distances, then the constraints.
+// Every rails must have the same length.
+[[nodiscard]] ToolRadius shared_radii(const std::vector<const SurfaceIndex*>& surfaces, const std::vector<Rails>& rails,
+                                      const FitOptions& options);
+// One tool fitted jointly to several patches: eq. (12) summed over the patches, every patch's rails
+// and the one set of radii as unknowns (constraints as in optimize_motion, without the max_length
+// shortening: `length` is the common axis length), starting from the patches' separate fits `fits`
+// with the shared_radii of their rails. Returns the patches' fits, all with the same tool.
+[[nodiscard]] std::vector<FitResult> fit_shared_tool(const std::vector<const SurfaceIndex*>& surfaces,
+                                                     std::vector<FitResult> fits, double length, const FitOptions& options);
 
 }  // namespace flankcam

@@ -110,6 +110,34 @@ class RigidResidual final : public ceres::SizedCostFunction<1, 3, 3, 3, 3, 3, 3,
   double L2_, w_;
 };
 
+// Tool constraints G D <= h (ToolConstraints) as one-sided penalties on the radius parameters:
+//   r_k = w max(0, g_k . D - h_k)
+// zero (and flat) where a row holds, linear in its violation where it does not.
+class HingeResidual final : public ceres::CostFunction {
+ public:
+  HingeResidual(Eigen::MatrixXd G, Eigen::VectorXd h, double w) : G_(std::move(G)), h_(std::move(h)), w_(w) {
+    set_num_residuals(int(h_.size()));
+    mutable_parameter_block_sizes()->push_back(int(G_.cols()));
+  }
+  bool Evaluate(double const* const* x, double* residuals, double** jacobians) const override {
+    const Eigen::VectorXd g = G_ * Eigen::Map<const Eigen::VectorXd>(x[0], G_.cols()) - h_;
+    using RowMajor = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+    for (Eigen::Index k = 0; k < g.size(); ++k) {
+      const bool on = g[k] > 0;
+      residuals[k] = on ? w_ * g[k] : 0.0;
+      if (jacobians && jacobians[0])
+        Eigen::Map<RowMajor>(jacobians[0], g.size(), G_.cols()).row(k) = on ? Eigen::RowVectorXd(w_ * G_.row(k))
+                                                                            : Eigen::RowVectorXd::Zero(G_.cols());
+    }
+    return true;
+  }
+
+ private:
+  Eigen::MatrixXd G_;
+  Eigen::VectorXd h_;
+  double w_;
+};
+
 // A solve whose result cannot be used: Ceres' FAILURE or USER_FAILURE, or a cost that is not
 // finite. NO_CONVERGENCE only means the solve used its iteration budget.
 inline bool solve_failed(const ceres::Solver::Summary& s) {

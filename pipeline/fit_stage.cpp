@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 
 #include <cmath>
+#include <memory>
 #include <optional>
 
 #include "core/detect.h"
@@ -85,6 +86,30 @@ std::optional<LoadedMesh> load_job_part(const Job& job) {
       .loaded;
 }
 
+namespace {
+// The fitted motion at its samples t_i in mm (part coordinates), with the overtravel poses.
+std::vector<ToolPose> poses_mm(const Job& job, const Similarity& frame, const Rails& rails) {
+  const int m = job.fit.samples_t;
+  std::vector<ToolPose> poses;
+  for (int i = 0; i < m; ++i) {
+    const double t = double(i) / (m - 1);
+    const Eigen::Vector3d a = frame.to_mm(rails.a.point(t)), b = frame.to_mm(rails.b.point(t));
+    poses.push_back({a, (b - a).normalized()});
+  }
+  // overtravel: the motion continued by that many mm beyond both ends, along the tip's direction
+  // of travel there, the axis held.
+  if (job.overtravel_mm > 0 && poses.size() >= 2) {
+    const auto beyond = [&](const ToolPose& end, const ToolPose& inner) {
+      return ToolPose{end.tip + job.overtravel_mm * (end.tip - inner.tip).normalized(), end.axis};
+    };
+    const ToolPose first = beyond(poses[0], poses[1]), last = beyond(poses.back(), poses[poses.size() - 2]);
+    poses.insert(poses.begin(), first);
+    poses.push_back(last);
+  }
+  return poses;
+}
+}  // namespace
+
 void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   const std::optional<LoadedMesh> separate = load_job_part(job);
   const TriMesh& part = separate ? separate->mesh : f.surface.mesh;
@@ -103,19 +128,21 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   o.gouge_tolerance_mm = job.tolerance_mm;
   for (FittedPatch& p : f.patches) {
     const FitResult& r = p.fit.fit;
-    const int m = job.fit.samples_t;
-    p.poses.clear();
-    for (int i = 0; i < m; ++i) {
-      const double t = double(i) / (m - 1);
-      const Eigen::Vector3d a = f.frame.to_mm(r.rails.a.point(t)), b = f.frame.to_mm(r.rails.b.point(t));
-      p.poses.push_back({a, (b - a).normalized()});
-    }
+    p.poses = poses_mm(job, f.frame, r.rails);
     p.assembly = assembly_of(job, f.frame, r);
     p.profile_mm = tool_profile_mm(f.frame, r);
     const double half = 0.5 * p.assembly.cutter_length();
     p.contacts.clear();
     for (const ToolPose& q : p.poses) p.contacts.push_back(design.closest(q.tip + half * q.axis).point);
     p.collisions = check_collisions(index, p.poses, p.assembly, o);
+    for (PassMotion& pm : p.earlier_passes) {  // earlier passes: their own poses, the same tool
+      pm.poses = poses_mm(job, f.frame, pm.rails);
+      pm.contacts.clear();
+      for (const ToolPose& q : pm.poses) pm.contacts.push_back(design.closest(q.tip + half * q.axis).point);
+      const CollisionReport c = check_collisions(index, pm.poses, p.assembly, o);
+      p.collisions.intervals.insert(p.collisions.intervals.end(), c.intervals.begin(), c.intervals.end());
+      p.collisions.positions_checked += c.positions_checked;
+    }
     for (const std::string& line : collision_summary(p)) progress(line);
   }
 }
@@ -202,6 +229,47 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
 }
 }  // namespace
 
+namespace {
+// The job's tool limits in the unit frame.
+ToolConstraints unit_constraints(const ToolJob& t, const Similarity& fr) {
+  ToolConstraints c;
+  c.min_radius = fr.length_to_unit(t.min_diameter_mm / 2);
+  c.max_radius = std::isfinite(t.max_diameter_mm) ? fr.length_to_unit(t.max_diameter_mm / 2) : INFINITY;
+  c.max_length = std::isfinite(t.max_length_mm) ? fr.length_to_unit(t.max_length_mm) : INFINITY;
+  c.min_tip_radius = fr.length_to_unit(t.min_tip_diameter_mm / 2);
+  c.max_cone_angle_rad = t.max_cone_angle_deg * M_PI / 180;
+  c.convex = t.convex;
+  return c;
+}
+
+// A catalogue tool in the unit frame: its sphere radii (tool_from_meridian) and axis length.
+std::pair<ToolRadius, double> unit_catalogue_tool(const CatalogueTool& t, const Similarity& fr) {
+  std::vector<Eigen::Vector2d> zr = t.meridian_mm();
+  for (Eigen::Vector2d& p : zr) p *= fr.scale;
+  return {tool_from_meridian(zr, 12), zr.back().x() - zr.front().x()};
+}
+
+// +1 when the patch's lines lie on the side Φ's normals point to, else -1 (the allowance's side).
+int lines_side(const SurfaceIndex& index, const PatchSpec& spec) {
+  double sum = 0;
+  for (const AxisLine& l : spec.lines) {
+    const Eigen::Vector3d mid = 0.5 * (l.a + l.b);
+    const Footpoint f = index.closest(mid);
+    sum += (mid - f.point).dot(f.normal) >= 0 ? 1 : -1;
+  }
+  return sum >= 0 ? 1 : -1;
+}
+
+// Φ moved by `offset` (unit frame) along its vertex normals times `side`: the target of a fit that
+// leaves that much stock.
+TriMesh offset_mesh(const TriMesh& mesh, double offset, int side) {
+  TriMesh out = mesh;
+  const std::vector<Eigen::Vector3d> n = vertex_normals(mesh);
+  for (size_t v = 0; v < out.vertices.size(); ++v) out.vertices[v] += side * offset * n[v];
+  return out;
+}
+}  // namespace
+
 FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   FittedJob out;
   out.surface = load_job_surface(job, progress);
@@ -212,10 +280,14 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   out.frame = unit_diagonal_frame(mesh);
   out.unit_surface = transformed(mesh, out.frame);
   const SurfaceIndex index(out.unit_surface);
+  std::optional<std::pair<ToolRadius, double>> catalogue;
+  if (job.tool.catalogue) catalogue = unit_catalogue_tool(*job.tool.catalogue, out.frame);
   const auto fit_options = [&] {
     FitOptions o = job.fit;
     o.threads = threads;
     if (job.robust_mm) o.robust_scale = out.frame.length_to_unit(*job.robust_mm);
+    o.constraints = unit_constraints(job.tool, out.frame);
+    if (catalogue) o.fixed_tool = catalogue->first;
     return o;
   };
   if (job.cover) {
@@ -223,6 +295,10 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     check_job(job, out, progress);
     return out;
   }
+  // With an allowance each patch is fitted to Φ offset towards its tool; the offset surfaces live here.
+  std::vector<std::unique_ptr<SurfaceIndex>> offsets;
+  std::vector<const SurfaceIndex*> targets;
+  std::vector<PatchOptions> patch_options;
   for (const PatchJob& p : job.patches) {
     PatchOptions o;
     o.fit = fit_options();
@@ -231,12 +307,89 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     o.fit.on_iteration = [&](int it, double objective) {
       progress(fmt::format("patch {}: iteration {}, F_motion {:.3e}", p.name, it, objective));
     };
+    PatchSpec spec = unit_spec(p, out.frame);
     FittedPatch fp;
     fp.job = &p;
-    fp.fit = fit_patch(index, unit_spec(p, out.frame), o);
+    const SurfaceIndex* target = &index;
+    const double allowance = job.passes_mm.empty() ? job.allowance_mm : job.passes_mm.back();
+    if (allowance > 0 || job.passes_mm.size() > 1) fp.allowance_side = lines_side(index, spec);
+    if (allowance > 0) {
+      offsets.push_back(
+          std::make_unique<SurfaceIndex>(offset_mesh(out.unit_surface, out.frame.length_to_unit(allowance), fp.allowance_side)));
+      target = offsets.back().get();
+      progress(fmt::format("patch {}: fitted to the surface offset by the allowance {} mm", p.name, allowance));
+    }
+    if (catalogue) {
+      // The catalogue tool's length is the axis length; the user's lines keep their tip ends.
+      PatchSpec fixed = spec;
+      fixed.length = catalogue->second;
+      for (AxisLine& l : fixed.lines) l.b = l.a + catalogue->second * (l.b - l.a).normalized();
+      fp.fit = fit_patch(*target, fixed, o);
+      // The best custom tool for the same patch, to compare: general shape, radii free.
+      PatchOptions custom = o;
+      custom.fit.fixed_tool.reset();
+      custom.fit.shape = ToolShape::General;
+      custom.fit.on_iteration = nullptr;
+      custom.on_stage = nullptr;
+      const PatchFit c = fit_patch(*target, spec, custom);
+      const std::vector<Eigen::Vector2d> profile = tool_profile_mm(out.frame, c.fit);
+      const ToolDimensions dims = tool_dimensions(profile);
+      fp.custom = CustomComparison{out.frame.length_to_mm(c.fit.eps_opt.max), c.coverage, dims.diameter_min_mm,
+                                   dims.diameter_max_mm, dims.length_mm};
+      progress(fmt::format("patch {}: catalogue tool {}: eps {:.4f} mm, coverage {:.1f}%; best custom tool: eps {:.4f} mm, "
+                           "coverage {:.1f}%",
+                           p.name, job.tool.catalogue->name, out.frame.length_to_mm(fp.fit.fit.eps_opt.max),
+                           100 * fp.fit.coverage, fp.custom->eps_mm, 100 * fp.custom->coverage));
+    } else {
+      fp.fit = fit_patch(*target, spec, o);
+    }
     report_fit(job, out, fp, progress);
     out.patches.push_back(std::move(fp));
+    targets.push_back(target);
+    patch_options.push_back(o);
   }
+  // tool: {shared: true}: one custom tool for every patch, fitted jointly to all of them (eq. 12
+  // summed over the patches), starting from their separate fits.
+  if (job.tool.shared && !catalogue && out.patches.size() > 1) {
+    std::vector<FitResult> fits;
+    double length = 0;
+    for (const FittedPatch& fp : out.patches) {
+      fits.push_back(fp.fit.fit);
+      length += fp.fit.fit.rails.length / double(out.patches.size());
+    }
+    FitOptions o = fit_options();
+    length = std::min(length, o.constraints.max_length);
+    progress(fmt::format("shared tool: one tool of length {:.3f} mm for {} patches", out.frame.length_to_mm(length),
+                         out.patches.size()));
+    fits = fit_shared_tool(targets, std::move(fits), length, o);
+    for (size_t k = 0; k < fits.size(); ++k) {
+      FittedPatch& fp = out.patches[k];
+      fp.fit.fit = std::move(fits[k]);
+      fp.fit = machine_and_trim(*targets[k], std::move(fp.fit), patch_options[k]);
+      report_fit(job, out, fp, progress);
+    }
+  }
+  // passes: every pass but the last with the last pass's tool held, its motion fitted to Φ offset by
+  // the pass's allowance (started from the last pass's motion).
+  for (size_t k = 0; k + 1 < job.passes_mm.size(); ++k)
+    for (FittedPatch& fp : out.patches) {
+      PassMotion pm;
+      pm.allowance_mm = job.passes_mm[k];
+      const SurfaceIndex target(
+          pm.allowance_mm > 0 ? offset_mesh(out.unit_surface, out.frame.length_to_unit(pm.allowance_mm), fp.allowance_side)
+                              : out.unit_surface);
+      FitOptions o = fit_options();
+      o.fixed_tool = fp.fit.fit.tool;
+      o.constraints = {};
+      const FitResult r = optimize_motion(target, fp.fit.fit.rails, o);
+      pm.rails = r.rails;
+      pm.eps_mm = out.frame.length_to_mm(r.eps_opt.max);
+      pm.coverage = coverage(target.mesh(), machined_surface(target, r.rails, r.tool).design_deviation,
+                             out.frame.length_to_unit(job.tolerance_mm));
+      progress(fmt::format("patch {}: pass {} (allowance {} mm): eps {:.4f} mm, coverage {:.1f}%", fp.job->name, k + 1,
+                           pm.allowance_mm, pm.eps_mm, 100 * pm.coverage));
+      fp.earlier_passes.push_back(std::move(pm));
+    }
   check_job(job, out, progress);
   return out;
 }
@@ -295,7 +448,44 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
   tool["diameter_max"] = round_mm(dims.diameter_max_mm);
   // The cone of the meridian itself: spheres d(z) = d0 + k z envelope a cone of half angle asin(k).
   if (r.tool.shape == ToolShape::Cone) tool["cone_half_angle_deg"] = std::round(dims.cone_half_angle_deg * 1e6) / 1e6 + 0.0;
+  if (job.tool.catalogue) {
+    const CatalogueTool& c = *job.tool.catalogue;
+    tool["catalogue"] = {{"name", c.name}, {"family", c.family}, {"file", c.file.string()}, {"line", c.line}};
+  }
+  if (job.tool.constrained()) {
+    const ConstraintCheck cc = check_constraints(r.tool, r.rails.length, unit_constraints(job.tool, fr));
+    nlohmann::ordered_json lim;
+    if (job.tool.min_diameter_mm > 0) lim["min_diameter_mm"] = job.tool.min_diameter_mm;
+    if (std::isfinite(job.tool.max_diameter_mm)) lim["max_diameter_mm"] = job.tool.max_diameter_mm;
+    if (std::isfinite(job.tool.max_length_mm)) lim["max_length_mm"] = job.tool.max_length_mm;
+    if (job.tool.min_tip_diameter_mm > 0) lim["min_tip_diameter_mm"] = job.tool.min_tip_diameter_mm;
+    if (job.tool.max_cone_angle_deg < 90) lim["max_cone_angle_deg"] = job.tool.max_cone_angle_deg;
+    if (job.tool.convex) lim["convex"] = true;
+    lim["met"] = cc.violation <= 1e-9;
+    if (!cc.what.empty()) lim["violated"] = cc.what;
+    tool["constraints"] = lim;
+  }
+  if (job.tool.shared) tool["shared"] = true;
   j["tool"] = tool;
+  if (p.custom)
+    j["compare_custom_tool"] = {
+        {"note", "the catalogue tool (this patch) against the best custom tool (general shape) fitted to the same patch"},
+        {"catalogue", {{"eps_mm", round_mm(fr.length_to_mm(r.eps_opt.max))}, {"coverage", p.fit.coverage}}},
+        {"custom", {{"eps_mm", round_mm(p.custom->eps_mm)}, {"coverage", p.custom->coverage},
+                    {"diameter_min", round_mm(p.custom->diameter_min_mm)}, {"diameter_max", round_mm(p.custom->diameter_max_mm)},
+                    {"length", round_mm(p.custom->length_mm)}}}};
+  if (!job.passes_mm.empty()) {
+    auto& passes = j["passes"] = nlohmann::ordered_json::array();
+    for (const PassMotion& pm : p.earlier_passes)
+      passes.push_back({{"allowance_mm", pm.allowance_mm}, {"eps_mm", round_mm(pm.eps_mm)}, {"coverage", pm.coverage}});
+    passes.push_back({{"allowance_mm", job.passes_mm.back()}, {"eps_mm", round_mm(fr.length_to_mm(r.eps_opt.max))},
+                      {"coverage", p.fit.coverage}});
+  }
+  if (const double a = job.passes_mm.empty() ? job.allowance_mm : job.passes_mm.back(); a > 0)
+    j["allowance"] = {{"allowance_mm", a},
+                      {"note", "the fit's target, coverage and deviation are the design surface offset by the allowance "
+                               "towards the tool"}};
+  if (job.overtravel_mm > 0) j["overtravel_mm"] = job.overtravel_mm;
   j["coverage"] = p.fit.coverage;
   j["tolerance_mm"] = job.tolerance_mm;
   double dmin = INFINITY, dmax = -INFINITY;
@@ -342,6 +532,45 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
   j["seconds"] = {{"init", std::round(p.fit.seconds_init * 1000) / 1000},
                   {"optimisation", std::round(p.fit.seconds_opt * 1000) / 1000}};
   return j;
+}
+
+std::string tool_sheet(const Job& job, const FittedPatch& p) {
+  const std::vector<Eigen::Vector2d>& zr = p.profile_mm;
+  const ToolDimensions dims = tool_dimensions(zr);
+  const std::string& name = p.job->name;
+  const auto angle = [&](size_t i) {  // local half angle of the meridian, deg (positive: widening towards the shank)
+    const size_t a = i == 0 ? 0 : i - 1, b = std::min(zr.size() - 1, i + 1);
+    return std::atan2(zr[b].y() - zr[a].y(), zr[b].x() - zr[a].x()) * 180 / M_PI + 0.0;
+  };
+  double steepest = 0;
+  for (size_t i = 0; i < zr.size(); ++i) steepest = std::max(steepest, std::abs(angle(i)));
+  std::string out = fmt::format("# grinding sheet: tool of patch {} ({} tool{}), mm and degrees\n", name,
+                                to_string(p.fit.fit.tool.shape), job.tool.shared ? ", shared by every patch" : "");
+  out += "# z from the tip along the axis, r the radius of the flank; grind to the profile within the tolerance\n";
+  out += fmt::format("tolerance_mm,{}\n", fixed(job.tolerance_mm, 6));
+  out += fmt::format("cutting_length_mm,{}\n", fixed(dims.length_mm, 4));
+  out += fmt::format("tip_diameter_mm,{}\n", fixed(2 * zr.front().y(), 4));
+  out += fmt::format("end_diameter_mm,{}\n", fixed(2 * zr.back().y(), 4));
+  out += fmt::format("min_diameter_mm,{}\n", fixed(dims.diameter_min_mm, 4));
+  out += fmt::format("max_diameter_mm,{}\n", fixed(dims.diameter_max_mm, 4));
+  out += fmt::format("cone_half_angle_deg,{}\n", fixed(dims.cone_half_angle_deg, 4));
+  out += fmt::format("steepest_half_angle_deg,{}\n", fixed(steepest, 4));
+  out += "point,z_mm,r_mm,diameter_mm,half_angle_deg\n";
+  for (size_t i = 0; i < zr.size(); ++i)
+    out += fmt::format("{},{},{},{},{}\n", i + 1, fixed(zr[i].x(), 4), fixed(zr[i].y(), 4), fixed(2 * zr[i].y(), 4), fixed(angle(i), 4));
+  return out;
+}
+
+ClProgram pass_program(const Job& job, const FittedJob& f, const FittedPatch& p, const PassMotion& pm, int tool) {
+  ClProgram cl = flank_program(p.job->name, pm.poses, p.profile_mm, job.feed_mm_min, job.spindle_rpm, job.lead_in_mm,
+                               job.retract_mm);
+  cl.tool = tool;
+  const size_t first = job.lead_in_mm < job.retract_mm ? 2 : 1;
+  for (size_t i = 0; i < pm.poses.size(); ++i) cl.moves[first + i].contact = pm.contacts[i];
+  cl.comments.push_back(fmt::format("FLANKCAM PASS WITH ALLOWANCE {} MM ON {}, EPS {:.4f} MM", pm.allowance_mm,
+                                    job.surface.filename().string(), pm.eps_mm));
+  (void)f;
+  return cl;
 }
 
 ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p, int tool) {
@@ -412,7 +641,22 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
   y += fmt::format("clearance: {}\nfeed: {}\nspindle: {}\nlead_in: {}\nretract: {}\n", num(job.clearance_mm),
                    num(job.feed_mm_min), num(job.spindle_rpm), num(job.lead_in_mm), num(job.retract_mm));
   const FitOptions& o = job.fit;
-  y += fmt::format("tool: {{shape: {}, control_points: {}}}\n", to_string(o.shape), o.meridian_control_points);
+  const ToolJob& t = job.tool;
+  if (t.catalogue) {
+    y += fmt::format("tool: {{catalogue: {}{}}}\n", t.catalogue->name, t.shared ? ", shared: true" : "");
+  } else {
+    std::string extra;
+    if (t.min_diameter_mm > 0) extra += ", min_diameter: " + num(t.min_diameter_mm);
+    if (std::isfinite(t.max_diameter_mm)) extra += ", max_diameter: " + num(t.max_diameter_mm);
+    if (std::isfinite(t.max_length_mm)) extra += ", max_length: " + num(t.max_length_mm);
+    if (t.min_tip_diameter_mm > 0) extra += ", min_tip_diameter: " + num(t.min_tip_diameter_mm);
+    if (t.max_cone_angle_deg < 90) extra += ", max_cone_angle: " + num(t.max_cone_angle_deg);
+    if (t.convex) extra += ", convex: true";
+    if (t.shared) extra += ", shared: true";
+    y += fmt::format("tool: {{shape: {}, control_points: {}{}}}\n", to_string(o.shape), o.meridian_control_points, extra);
+  }
+  if (job.allowance_mm > 0) y += "allowance: " + num(job.allowance_mm) + "\n";
+  if (job.overtravel_mm > 0) y += "overtravel: " + num(job.overtravel_mm) + "\n";
   y += fmt::format("tolerance: {}\nsampling: {{s: {}, t: {}}}\n", num(job.tolerance_mm), o.samples_s, o.samples_t);
   y += fmt::format("weights: {{plane: {}, fair: {}, point: {}, rigid: {}, anchor: {}}}\n", num(o.w_plane), num(o.w_fair),
                    num(o.w_point), num(o.w_rigid), num(o.w_anchor));

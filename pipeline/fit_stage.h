@@ -18,6 +18,21 @@ namespace flankcam::pipeline {
 
 using Progress = std::function<void(const std::string&)>;  // one line of progress (stderr)
 
+// `tool: {catalogue: NAME}`: the custom tool (general shape) fitted to the same patch, to compare.
+struct CustomComparison {
+  double eps_mm = 0, coverage = 0;  // ε (eq. 13) and share of the surface within the tolerance
+  double diameter_min_mm = 0, diameter_max_mm = 0, length_mm = 0;
+};
+
+// `passes:` before the last one: the same tool's motion fitted to Φ offset by the pass's allowance.
+struct PassMotion {
+  double allowance_mm = 0;
+  Rails rails;                               // unit frame
+  double eps_mm = 0, coverage = 0;           // against the offset surface
+  std::vector<ToolPose> poses;               // mm, like FittedPatch::poses
+  std::vector<Eigen::Vector3d> contacts;
+};
+
 struct FittedPatch {
   const PatchJob* job = nullptr;
   PatchFit fit;                  // unit frame
@@ -26,6 +41,9 @@ struct FittedPatch {
   std::vector<Eigen::Vector2d> profile_mm;  // the tool's meridian (z, r) from the tip, mm
   std::vector<Eigen::Vector3d> contacts;    // per pose: the design surface nearest the middle of the cutter, mm
   CollisionReport collisions;    // against the whole part
+  std::optional<CustomComparison> custom;  // catalogue jobs only
+  std::vector<PassMotion> earlier_passes;  // `passes:`: every pass but the last (which is `fit`), in order
+  int allowance_side = 0;        // allowance: +1/-1 the side of the design surface's normals the fit's target lies on
 };
 
 // `patches: auto`: the whole surface as the union of the detected patches (core/detect.h).
@@ -75,6 +93,10 @@ inline const std::string cover_deviation_svg_name = "surface-deviation.svg";
 // every fitted patch against the whole part (job.part, default the design surface).
 void check_job(const Job& job, FittedJob& fitted, const Progress& progress);
 
+// The grinding sheet of a patch's tool (NAME-tool-sheet.csv): dimensions, then the profile points
+// with diameter and local half angle, mm and degrees.
+[[nodiscard]] std::string tool_sheet(const Job& job, const FittedPatch& patch);
+
 // Rounds a length in mm to 1 nm for reports (stable text, no spurious digits).
 [[nodiscard]] double round_mm(double x);
 
@@ -88,5 +110,8 @@ void check_job(const Job& job, FittedJob& fitted, const Progress& progress);
 // The patch's CL-data (APT model): approach, the fitted poses at the job's feed, retract; the tool's
 // meridian in mm; a comment with the fitted error and one flagging allowed collisions.
 [[nodiscard]] ClProgram patch_program(const Job& job, const FittedJob& fitted, const FittedPatch& patch, int tool);
+// The CL-data of an earlier pass (PassMotion) of the patch, the same tool.
+[[nodiscard]] ClProgram pass_program(const Job& job, const FittedJob& fitted, const FittedPatch& patch, const PassMotion& pass,
+                                     int tool);
 
 }  // namespace flankcam::pipeline

@@ -11,6 +11,7 @@
 #include "core/errors.h"
 #include "cad/cad_reader.h"
 #include "core/yaml_fields.h"
+#include "pipeline/data_dir.h"
 #include "postproc/nc_program.h"
 
 namespace flankcam::pipeline {
@@ -125,6 +126,41 @@ void read_post(const Reader& r, const YAML::Node& p, PostJob& post) {
   if (p["safe_height"]) post.safe_height_mm = in_range(r, p["safe_height"], "post.safe_height", 0, max_length_mm, "mm");
 }
 
+// tool: {shape, control_points, min_diameter, max_diameter, max_length, min_tip_diameter,
+// max_cone_angle, convex, catalogue, shared}.
+void read_tool(const Reader& r, const YAML::Node& t, Job& job) {
+  r.only_keys(t, "tool", {"shape", "control_points", "min_diameter", "max_diameter", "max_length", "min_tip_diameter",
+                          "max_cone_angle", "convex", "catalogue", "shared"});
+  if (t["shape"]) job.fit.shape = read_shape(r, t["shape"]);
+  if (t["control_points"]) job.fit.meridian_control_points = r.integer(t["control_points"], "tool.control_points", 4, max_samples_s);
+  ToolJob& tj = job.tool;
+  const auto mm = [&](const char* key, double& v, double lo) {
+    if (t[key]) v = in_range(r, t[key], std::string("tool.") + key, lo, max_length_mm, "mm");
+  };
+  mm("min_diameter", tj.min_diameter_mm, 0);
+  mm("max_diameter", tj.max_diameter_mm, 1e-3);
+  mm("max_length", tj.max_length_mm, 1e-3);
+  mm("min_tip_diameter", tj.min_tip_diameter_mm, 0);
+  if (t["max_cone_angle"]) tj.max_cone_angle_deg = in_range(r, t["max_cone_angle"], "tool.max_cone_angle", 0, 90, "deg");
+  if (t["convex"]) tj.convex = r.boolean(t["convex"], "tool.convex");
+  if (t["shared"]) tj.shared = r.boolean(t["shared"], "tool.shared");
+  if (tj.min_diameter_mm > tj.max_diameter_mm)
+    r.fail(t["min_diameter"], "tool.min_diameter", fmt::format("{} mm is larger than tool.max_diameter", tj.min_diameter_mm));
+  if (tj.min_tip_diameter_mm > tj.max_diameter_mm)
+    r.fail(t["min_tip_diameter"], "tool.min_tip_diameter", fmt::format("{} mm is larger than tool.max_diameter", tj.min_tip_diameter_mm));
+  if (const YAML::Node c = t["catalogue"]) {
+    for (const char* k : {"shape", "control_points", "min_diameter", "max_diameter", "max_length", "min_tip_diameter",
+                          "max_cone_angle", "convex"})
+      if (t[k]) r.fail(t[k], std::string("tool.") + k, "not with tool.catalogue (a catalogue tool is fixed; only its motion is fitted)");
+    const std::string name = r.text(c, "tool.catalogue");
+    try {
+      tj.catalogue = find_catalogue_tool(tools_dir(), name);
+    } catch (const InputError& e) {
+      r.fail(c, "tool.catalogue", e.what());
+    }
+  }
+}
+
 // KEY: FILE | {file: FILE, faces: [N, ...], deflection: MM}; faces and deflection only for STEP/IGES.
 struct FileKey {
   std::filesystem::path path;
@@ -158,6 +194,11 @@ FileKey read_file_key(const Reader& r, const YAML::Node& n, const std::string& k
 
 }  // namespace
 
+bool ToolJob::constrained() const {
+  return min_diameter_mm > 0 || std::isfinite(max_diameter_mm) || std::isfinite(max_length_mm) || min_tip_diameter_mm > 0 ||
+         max_cone_angle_deg < 90 || convex;
+}
+
 Eigen::Matrix3d setup_rotation(const PostJob& post) {
   constexpr double deg = M_PI / 180;
   return (Eigen::AngleAxisd(post.setup_rotate_deg[2] * deg, Eigen::Vector3d::UnitZ()) *
@@ -172,7 +213,7 @@ Job read_job(const std::filesystem::path& file) {
   const Reader r(name);
   const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
-  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post"});
+  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post", "allowance", "passes", "overtravel"});
 
   Job job;
   job.file = file;
@@ -203,11 +244,19 @@ Job read_job(const std::filesystem::path& file) {
   if (root["lead_in"]) job.lead_in_mm = in_range(r, root["lead_in"], "lead_in", 0, max_length_mm, "mm");
   if (root["retract"]) job.retract_mm = in_range(r, root["retract"], "retract", 1e-3, max_length_mm, "mm");
   if (job.retract_mm < job.lead_in_mm) r.fail(root["retract"] ? root["retract"] : root, "retract", "must be >= lead_in");
-  if (const YAML::Node t = root["tool"]) {
-    r.only_keys(t, "tool", {"shape", "control_points"});
-    if (t["shape"]) job.fit.shape = read_shape(r, t["shape"]);
-    if (t["control_points"]) job.fit.meridian_control_points = r.integer(t["control_points"], "tool.control_points", 4, max_samples_s);
+  if (const YAML::Node t = root["tool"]) read_tool(r, t, job);
+  if (root["allowance"]) job.allowance_mm = in_range(r, root["allowance"], "allowance", 0, 100, "mm");
+  if (const YAML::Node ps = root["passes"]) {
+    if (root["allowance"]) r.fail(root["allowance"], "allowance", "not with passes: (give each pass its allowance)");
+    if (!ps.IsSequence() || ps.size() == 0 || ps.size() > 20)
+      r.fail(ps, "passes", "expected a list of 1 to 20 passes such as [{allowance: 0.3}, {allowance: 0}]");
+    for (size_t k = 0; k < ps.size(); ++k) {
+      const std::string key = fmt::format("passes[{}]", k);
+      r.only_keys(ps[k], key, {"allowance"});
+      job.passes_mm.push_back(in_range(r, r.need(ps[k], "allowance", key + ".allowance"), key + ".allowance", 0, 100, "mm"));
+    }
   }
+  if (root["overtravel"]) job.overtravel_mm = in_range(r, root["overtravel"], "overtravel", 0, 1000, "mm");
   if (root["tolerance"]) job.tolerance_mm = in_range(r, root["tolerance"], "tolerance", 1e-5, 100, "mm");
   if (const YAML::Node s = root["sampling"]) {
     r.only_keys(s, "sampling", {"s", "t"});
@@ -258,6 +307,13 @@ Job read_job(const std::filesystem::path& file) {
   const YAML::Node ps = root["patches"];
   if (!ps) throw InputError(name + ": patches: missing (a list of patches with their initialisation, or auto)");
   if (ps.IsScalar() && ps.Scalar() == "auto") {
+    // Detection fits its own motions and tools patch by patch: a fixed or shared tool and an
+    // allowance are for listed patches (detected-job.yaml can take them).
+    if (const YAML::Node t = root["tool"])
+      for (const char* k : {"catalogue", "shared"})
+        if (t[k]) r.fail(t[k], std::string("tool.") + k, "not with patches: auto (list the patches, e.g. from detected-job.yaml)");
+    for (const char* k : {"allowance", "passes"})
+      if (root[k]) r.fail(root[k], k, "not with patches: auto (list the patches, e.g. from detected-job.yaml)");
     CoverJob& c = job.cover.emplace();
     if (const YAML::Node cv = root["cover"]) {
       if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8}");

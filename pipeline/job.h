@@ -11,6 +11,7 @@
 
 #include "core/fitting.h"
 #include "core/patch.h"
+#include "pipeline/tool_catalogue.h"
 
 namespace flankcam::pipeline {
 
@@ -48,6 +49,20 @@ struct CoverJob {
   int max_patches = 8;     // 1 .. 32
 };
 
+// `tool:` beyond shape and control points (mm, deg): limits on a custom tool, enforced in the fit;
+// or a catalogue tool (only the motion is fitted); or one tool shared by every patch.
+struct ToolJob {
+  double min_diameter_mm = 0, max_diameter_mm = INFINITY;  // of the meridian
+  double max_length_mm = INFINITY;                         // cutting length
+  double min_tip_diameter_mm = 0;                          // at the tip end
+  double max_cone_angle_deg = 90;                          // steepest half angle of the meridian
+  bool convex = false;                                     // no waist
+  std::optional<CatalogueTool> catalogue;                  // tool: {catalogue: NAME}
+  bool shared = false;                                     // one tool for all patches
+  [[nodiscard]] bool constrained() const;
+};
+
+
 // The setup's rotation R (work = R part + t).
 [[nodiscard]] Eigen::Matrix3d setup_rotation(const PostJob& post);
 
@@ -66,6 +81,10 @@ struct Job {
   double tolerance_mm = 0.01;
   std::optional<double> robust_mm;  // Cauchy scale of the fit; unset: FitOptions' relative default
   FitOptions fit;                   // sampling, weights, shape, iterations (unit-free parts)
+  ToolJob tool;                     // constraints, catalogue, shared (mm; turned into fit options per surface)
+  double allowance_mm = 0;          // stock left on the design surface: the fit's target is Φ offset by it
+  std::vector<double> passes_mm;    // passes: [{allowance: A}, ...], in order; empty: one pass at allowance_mm
+  double overtravel_mm = 0;         // the motion continued beyond the surface at both ends
   std::vector<PatchJob> patches;   // empty with `patches: auto`
   std::optional<CoverJob> cover;   // set: `patches: auto`
   std::string machine;  // `run`: a machine file (relative to the job file) or a name in machines/

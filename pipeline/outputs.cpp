@@ -63,6 +63,10 @@ std::vector<std::string> write_patch_files(OutputDir& out, const Job& job, const
     write_tool_dxf(out.file(name + "-tool.dxf"), profile, title);
     write_tool_stl(out.file(name + "-tool.stl"), profile, title);
     files.insert(files.end(), {name + "-tool.csv", name + "-tool.dxf", name + "-tool.stl"});
+    if (!job.tool.catalogue) {  // a custom tool is ground: its sheet goes beside the DXF
+      write_text(out, name + "-tool-sheet.csv", tool_sheet(job, p));
+      files.push_back(name + "-tool-sheet.csv");
+    }
   }
   if (what.program) {
     if (what.apt) write_apt(out.file(name + ".apt"), *what.program), files.push_back(name + ".apt");

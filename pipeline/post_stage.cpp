@@ -75,12 +75,18 @@ std::vector<PostedProgram> post_programs(const Machine& m, const std::vector<Pos
     PostOptions o = settings.options;
     o.dialect = d;
     int number = 1;
-    for (const PostInput& in : inputs) {
-      Posted p = post({in}, m, o, in.patch, header);
+    // One program per patch: its consecutive inputs (the passes of `passes:`) are its sections.
+    bool several = false;
+    for (size_t k = 0; k < inputs.size();) {
+      size_t end = k + 1;
+      while (end < inputs.size() && inputs[end].patch == inputs[k].patch) ++end;
+      several = several || k > 0;
+      Posted p = post(std::vector<PostInput>(inputs.begin() + long(k), inputs.begin() + long(end)), m, o, inputs[k].patch, header);
       p.program.number = number++;
-      out.push_back(summarize(std::move(p), in.patch + file_extension(d), in.patch, d));
+      out.push_back(summarize(std::move(p), inputs[k].patch + file_extension(d), inputs[k].patch, d));
+      k = end;
     }
-    if (inputs.size() > 1) {
+    if (several) {
       Posted p = post(inputs, m, o, all_name, header);
       p.program.number = number;
       out.push_back(summarize(std::move(p), all_name + file_extension(d), "", d));

@@ -30,7 +30,7 @@ void plan_fit_files(const std::string& name, bool tool, bool apt, bool cl, Outpu
   const std::string owner = "patch " + name;
   for (const char* suffix : {"-envelope.ply", "-deviation.ply", "-collisions.obj"}) plan.add(name + suffix, owner);
   if (tool)
-    for (const char* suffix : {"-tool.csv", "-tool.dxf", "-tool.stl"}) plan.add(name + suffix, owner);
+    for (const char* suffix : {"-tool.csv", "-tool.dxf", "-tool.stl", "-tool-sheet.csv"}) plan.add(name + suffix, owner);
   if (apt) plan.add(name + ".apt", owner);
   if (cl) plan.add(name + "-cl.csv", owner);
 }
@@ -122,7 +122,9 @@ double tool_length(const Job& job, const FittedPatch& p) {
 RunResult run(Job job, Machine machine, const RunOptions& options) {
   RunResult r;
   r.settings = settings_of(job);
-  r.fit = fit_run(std::move(job), options, [](size_t k) { return int(k) + 1; });
+  // One tool for every patch (shared or from the catalogue): one tool number, so no tool change.
+  const bool one_tool = job.tool.shared || job.tool.catalogue.has_value();
+  r.fit = fit_run(std::move(job), options, [one_tool](size_t k) { return one_tool ? 1 : int(k) + 1; });
   r.machine = std::move(machine);
   const Job& j = r.fit.job;
   const ThreadScope threads(options.threads);
@@ -133,11 +135,16 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     const FittedPatch& p = r.fit.fitted.patches[k];
     r.tool_length_mm.push_back(tool_length(j, p));
     if (!r.fit.cl_data[k]) continue;
-    ClProgram work = *r.fit.cl_data[k];
-    for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
     ToolAssembly assembly = p.assembly;  // the program's cutter is the tool's meridian
     assembly.cutter = p.profile_mm;
-    inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back(), std::move(assembly)});
+    // passes: each its own section of the patch's program, in order, the last pass being the fit.
+    std::vector<ClProgram> sections;
+    for (const PassMotion& pm : p.earlier_passes) sections.push_back(pass_program(j, r.fit.fitted, p, pm, r.fit.cl_data[k]->tool));
+    sections.push_back(*r.fit.cl_data[k]);
+    for (ClProgram& work : sections) {
+      for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
+      inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back(), assembly});
+    }
   }
   if (inputs.empty()) return r;
   // The part placed on the machine (work frame): the links are planned against it, and every

@@ -348,3 +348,142 @@ TEST_CASE("a fit gives the same rails, radii and errors on 1 and 2 threads") {
   CHECK(one.eps_opt.max == two.eps_opt.max);
   CHECK(one.objective == two.objective);
 }
+
+namespace {
+// The tool's meridian in mm and what a tool grinder would measure on it.
+struct MeridianFacts {
+  double r_min = INFINITY, r_max = 0, r_tip = 0, length = 0, steepest_deg = 0, waist = 0;
+};
+MeridianFacts facts_mm(const FitResult& r, const Similarity& frame) {
+  std::vector<Eigen::Vector2d> mer = meridian(r.tool, r.rails.length, 241);
+  for (auto& p : mer) p = Eigen::Vector2d(frame.length_to_mm(p.x()), frame.length_to_mm(p.y()));
+  MeridianFacts f;
+  for (const auto& p : mer) f.r_min = std::min(f.r_min, p.y()), f.r_max = std::max(f.r_max, p.y());
+  f.r_tip = mer.front().y();
+  f.length = mer.back().x() - std::min(0.0, mer.front().x());
+  for (size_t i = 1; i < mer.size(); ++i)
+    f.steepest_deg = std::max(f.steepest_deg, std::atan2(std::abs(mer[i].y() - mer[i - 1].y()), mer[i].x() - mer[i - 1].x()) * 180 / M_PI);
+  for (size_t j = 1; j + 1 < mer.size(); ++j) {  // a waist: lower than the highest points on both sides
+    double left = 0, right = 0;
+    for (size_t i = 0; i < j; ++i) left = std::max(left, mer[i].y());
+    for (size_t i = j + 1; i < mer.size(); ++i) right = std::max(right, mer[i].y());
+    f.waist = std::max(f.waist, std::min(left, right) - mer[j].y());
+  }
+  return f;
+}
+}  // namespace
+
+TEST_CASE("tool constraints are met by every fitted tool where the unconstrained fit violates them") {
+  struct Limits {
+    double min_d, max_d, max_len, min_tip, max_angle_deg;
+    bool convex;
+  };
+  struct ConstrainedCase {
+    const char* motion;
+    const char* name;
+    RadiusProfile profile;
+    Limits limits;
+  };
+  // barrel: diameters 12 .. 15 mm, length 40, end slopes 8.5 deg; spline: a waist, diameters 10 .. 17 mm.
+  const std::vector<ConstrainedCase> cases = {
+      {"twist", "barrel", barrel_profile(6, 1.5), {11, 14, 35, 12.5, 5, false}},
+      {"arc", "spline", spline_profile({5.0, 6.5, 7.5, 6.5, 7.0, 8.5}), {11, 15.5, 38, 10.5, 20, true}}};
+  for (const ConstrainedCase& c : cases) {
+    const std::string name = c.name;
+    CAPTURE(name);
+    const Exact ex = exact_envelope(c.motion, c.profile);
+    const SurfaceIndex surface(ex.unit_mesh);
+    std::vector<AxisLine> lines;
+    for (double t : {0.0, 0.25, 0.5, 0.75, 1.0}) lines.push_back({ex.frame.to_unit(ex.motion.a(t)), ex.frame.to_unit(ex.motion.b(t))});
+    FitOptions o;
+    const Rails init = rails_from_lines(lines, 0, 0, o);
+    const FitResult free_fit = optimize_motion(surface, init, o);
+    const Limits& l = c.limits;
+    ToolConstraints& tc = o.constraints;
+    tc.min_radius = ex.frame.length_to_unit(l.min_d / 2);
+    tc.max_radius = ex.frame.length_to_unit(l.max_d / 2);
+    tc.max_length = ex.frame.length_to_unit(l.max_len);
+    tc.min_tip_radius = ex.frame.length_to_unit(l.min_tip / 2);
+    tc.max_cone_angle_rad = l.max_angle_deg * M_PI / 180;
+    tc.convex = l.convex;
+    const FitResult fit = optimize_motion(surface, init, o);
+    const MeridianFacts before = facts_mm(free_fit, ex.frame), after = facts_mm(fit, ex.frame);
+    const double tol = 1e-4;  // of the diagonal
+    const MachinedSurface ms_free = machined_surface(surface, free_fit.rails, free_fit.tool);
+    const MachinedSurface ms = machined_surface(surface, fit.rails, fit.tool);
+    const double cov_free = coverage(ex.unit_mesh, ms_free.design_deviation, 10 * tol);
+    const double cov = coverage(ex.unit_mesh, ms.design_deviation, 10 * tol);
+    MESSAGE(name << ": free D " << 2 * before.r_min << ".." << 2 * before.r_max << " tip " << 2 * before.r_tip << " L "
+                   << before.length << " angle " << before.steepest_deg << " waist " << before.waist << " | constrained D "
+                   << 2 * after.r_min << ".." << 2 * after.r_max << " tip " << 2 * after.r_tip << " L " << after.length
+                   << " angle " << after.steepest_deg << " waist " << after.waist << " | eps " << free_fit.eps_opt.max << " -> "
+                   << fit.eps_opt.max << ", coverage within 1e-3 " << cov_free << " -> " << cov);
+    // The unconstrained fit breaks the limits the test sets...
+    CHECK(2 * before.r_max > l.max_d);
+    CHECK(before.length > l.max_len);
+    if (l.convex) CHECK(before.waist > 0.05);
+    else CHECK(before.steepest_deg > l.max_angle_deg);
+    if (c.name == std::string("barrel")) CHECK(2 * before.r_tip < l.min_tip);
+    else CHECK(2 * before.r_min < l.min_d);
+    // ... and the constrained one meets every one of them on its meridian (1 nm of slack).
+    CHECK(2 * after.r_min >= l.min_d - 1e-6);
+    CHECK(2 * after.r_max <= l.max_d + 1e-6);
+    CHECK(2 * after.r_tip >= l.min_tip - 1e-6);
+    CHECK(after.length <= l.max_len + 1e-6);
+    CHECK(after.steepest_deg <= l.max_angle_deg + 1e-6);
+    if (l.convex) CHECK(after.waist <= 1e-6);
+    CHECK(check_constraints(fit.tool, fit.rails.length, tc).violation <= 1e-9);
+    // It still fits and reports: a finite ε over the samples, part of the surface within the tolerance.
+    CHECK(fit.eps_opt.samples > 1000);
+    CHECK(std::isfinite(fit.eps_opt.max));
+    CHECK(fit.status != FitStatus::SolverFailed);
+    CHECK(cov > 0.1);
+  }
+}
+
+TEST_CASE("constrained_tool projects random radii onto every constraint row") {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(0.01, 0.2);
+  for (int trial = 0; trial < 50; ++trial) {
+    CAPTURE(trial);
+    ToolRadius tool;
+    tool.shape = trial % 3 == 0 ? ToolShape::Cone : ToolShape::General;
+    tool.D.resize(tool.shape == ToolShape::Cone ? 2 : 10);
+    for (double& d : tool.D) d = u(rng);
+    ToolConstraints c;
+    c.min_radius = 0.04, c.max_radius = 0.12, c.min_tip_radius = 0.05, c.max_cone_angle_rad = 0.1, c.convex = trial % 2 == 0;
+    const ToolRadius p = constrained_tool(tool, 0.3, c);
+    const ConstraintRows rows = constraint_rows(tool, 0.3, c);  // the rows the projection used
+    const Eigen::VectorXd D = Eigen::Map<const Eigen::VectorXd>(p.D.data(), Eigen::Index(p.D.size()));
+    CHECK((rows.G * D - rows.h).maxCoeff() <= 1e-12);
+    CHECK(check_constraints(p, 0.3, c).violation <= 1e-9);
+  }
+}
+
+TEST_CASE("a fixed tool given by its meridian, fitted to its own exact envelope, is recovered by the motion alone") {
+  // A circle-segment (barrel) tool: Ø16 at the middle, profile radius 150 mm, 40 mm long.
+  std::vector<Eigen::Vector2d> zr;
+  for (int k = 0; k <= 80; ++k) {
+    const double z = 40.0 * k / 80;
+    zr.emplace_back(z, 8 - (150 - std::sqrt(150 * 150 - (z - 20) * (z - 20))));
+  }
+  const ToolRadius mm_tool = tool_from_meridian(zr, 12);
+  // The sphere radii reproduce the meridian: d at the middle is the radius there, 8 mm.
+  CHECK(std::abs(mm_tool.d(0.5) - 8) < 1e-3);
+  const Exact ex = exact_envelope("arc", mm_tool.profile());
+  const SurfaceIndex surface(ex.unit_mesh);
+  std::mt19937 rng(3);
+  std::vector<AxisLine> lines;
+  for (double t : {0.0, 0.25, 0.5, 0.75, 1.0}) lines.push_back(perturbed(ex, t, rng));
+  FitOptions o;
+  ToolRadius unit_tool = mm_tool;
+  for (double& d : unit_tool.D) d = ex.frame.length_to_unit(d);
+  o.fixed_tool = unit_tool;
+  const FitResult r = optimize_motion(surface, rails_from_lines(lines, 0, ex.frame.length_to_unit(40), o), o);
+  CHECK(r.tool.D == unit_tool.D);  // the radii were not unknowns
+  const MachinedSurface ms = machined_surface(surface, r.rails, r.tool);
+  const double cov = coverage(ex.unit_mesh, ms.design_deviation, 1e-4);
+  MESSAGE("fixed barrel tool: eps " << r.eps_ini.max << " -> " << r.eps_opt.max << ", coverage within 1e-4: " << cov);
+  CHECK(cov >= 0.95);
+  CHECK(r.eps_opt.max <= 1e-4);
+}

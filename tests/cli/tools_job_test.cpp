@@ -1,0 +1,77 @@
+// `flankcam run` with the tool keys of issue 15: a shared custom tool within shop limits, and a
+// catalogue tool compared with the best custom one (the bundled blade examples).
+#include <doctest/doctest.h>
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "tests/test_util.h"
+
+using namespace flankcam;
+
+namespace {
+int count(const std::string& text, const std::string& word) {
+  int n = 0;
+  for (size_t at = text.find(word); at != std::string::npos; at = text.find(word, at + 1)) ++n;
+  return n;
+}
+}  // namespace
+
+TEST_CASE("flankcam run of examples/blade/job-shared-tool.yaml: one tool within its limits, one tool change, a grinding sheet") {
+  test::ScratchDir dir("shared-tool-run");
+  const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/job-shared-tool.yaml";
+  const test::RunResult r = test::run_flankcam("run " + job + " --quiet --out " + dir.file("out"), dir);
+  CAPTURE(r.err);
+  REQUIRE(r.code == 0);
+  const nlohmann::json report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  REQUIRE(report["patches"].size() == 3);
+  const std::string tool = test::read_text(dir.file("out/blade-1-tool.csv"));
+  for (const auto& p : report["patches"]) {
+    const std::string name = p["name"];
+    CAPTURE(name);
+    CHECK(p["tool"]["shared"] == true);
+    CHECK(p["tool"]["constraints"]["met"] == true);
+    CHECK(p["tool"]["diameter_min"].get<double>() >= 6 - 1e-6);
+    CHECK(p["tool"]["diameter_max"].get<double>() <= 20 + 1e-6);
+    MESSAGE(name << ": eps " << p["eps_opt_mm"] << " mm, coverage " << p["coverage"] << ", D " << p["tool"]["diameter_min"]
+                 << ".." << p["tool"]["diameter_max"]);
+    // The same meridian in every tool file (apart from the comment naming the patch).
+    const std::string mine = test::read_text(dir.file("out/" + name + "-tool.csv"));
+    CHECK(mine.substr(mine.find('\n')) == tool.substr(tool.find('\n')));
+    const std::string sheet = test::read_text(dir.file("out/" + name + "-tool-sheet.csv"));
+    CHECK(sheet.find("shared by every patch") != std::string::npos);
+    CHECK(sheet.find("tolerance_mm,0.015000") != std::string::npos);
+    CHECK(std::filesystem::exists(dir.file("out/" + name + ".nc")));
+  }
+  // All patches run with one tool: a single tool change (M6) in the program of all patches.
+  CHECK(count(test::read_text(dir.file("out/all-patches.nc")), "M6") == 1);
+}
+
+TEST_CASE("flankcam run of examples/blade/job-catalogue.yaml: the catalogue taper against the best custom tool") {
+  test::ScratchDir dir("catalogue-run");
+  const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/job-catalogue.yaml";
+  const test::RunResult r = test::run_flankcam("run " + job + " --quiet --out " + dir.file("out"), dir);
+  CAPTURE(r.err);
+  REQUIRE(r.code == 0);
+  const nlohmann::json report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  for (const auto& p : report["patches"]) {
+    const std::string name = p["name"];
+    CAPTURE(name);
+    CHECK(p["tool"]["catalogue"]["name"] == "taper-d10-1deg-l65");
+    // The tool is the catalogue's: Ø10 at the tip, 1 deg, 65 mm (Ø12.27 at the shank end).
+    CHECK(p["tool"]["diameter_min"].get<double>() == doctest::Approx(10).epsilon(2e-3));
+    CHECK(p["tool"]["diameter_max"].get<double>() == doctest::Approx(10 + 2 * 65 * std::tan(M_PI / 180)).epsilon(2e-3));
+    CHECK(p["tool"]["length"].get<double>() == doctest::Approx(65).epsilon(2e-3));
+    const auto& cmp = p["compare_custom_tool"];
+    MESSAGE(name << ": catalogue eps " << cmp["catalogue"]["eps_mm"] << " mm, coverage " << cmp["catalogue"]["coverage"]
+                 << "; custom eps " << cmp["custom"]["eps_mm"] << " mm, coverage " << cmp["custom"]["coverage"]);
+    CHECK(cmp["custom"]["eps_mm"].get<double>() > 0);
+    CHECK(cmp["catalogue"]["eps_mm"] == p["eps_opt_mm"]);
+    CHECK(!std::filesystem::exists(dir.file("out/" + name + "-tool-sheet.csv")));  // bought, not ground
+  }
+  CHECK(count(test::read_text(dir.file("out/all-patches.nc")), "M6") == 1);
+}

@@ -1,0 +1,381 @@
+// Tools in jobs (issue 15): constraints enforced in the fit, the catalogue, one shared tool,
+// allowance and overtravel, the grinding sheet. Exact envelopes are the ground truth.
+#include <doctest/doctest.h>
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <map>
+#include <sstream>
+#include <string>
+
+#include "core/errors.h"
+#include "core/machined_surface.h"
+#include "pipeline/data_dir.h"
+#include "pipeline/run.h"
+#include "pipeline/tool_catalogue.h"
+#include "postproc/gcode.h"
+#include "postproc/tool_export.h"
+#include "tests/test_util.h"
+
+using namespace flankcam;
+
+namespace {
+// The exact envelope of `profile` (mm) under the analytic `motion` of axis length `length_mm`,
+// written as DIR/surface.obj, and a job that fits it from lines through the true axis at `ts`.
+struct EnvelopeJob {
+  LineMotion motion;
+  TriMesh mesh;  // mm
+  double diagonal_mm = 0;
+};
+EnvelopeJob envelope_job(const test::ScratchDir& dir, const char* motion, const RadiusProfile& profile, double length_mm) {
+  AnalyticMotionOptions o;
+  o.kind = motion;
+  o.length = length_mm;
+  EnvelopeJob e;
+  e.motion = analytic_motion(o);
+  e.mesh = envelope_grid(e.motion, profile, 66, 200, 1).mesh;
+  e.diagonal_mm = bounding_box(e.mesh.vertices).diagonal();
+  write_obj(dir.file("surface.obj"), e.mesh);
+  return e;
+}
+std::string patch_yaml(const EnvelopeJob& e, const std::string& name, const std::vector<double>& ts) {
+  std::string y = fmt::format("  - name: {}\n    init: lines\n    lines:\n", name);
+  for (double t : ts) {
+    const Eigen::Vector3d a = e.motion.a(t), b = e.motion.b(t);
+    y += fmt::format("      - [{}, {}, {}, {}, {}, {}]\n", a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
+  }
+  return y;
+}
+pipeline::FitRun fit_job_file(const test::ScratchDir& dir, const std::string& yaml) {
+  test::write_text(dir.file("job.yaml"), yaml);
+  return pipeline::fit(pipeline::read_job(dir.file("job.yaml")), {});
+}
+int count_m6(const std::string& text) {
+  int n = 0;
+  for (size_t at = text.find("M6"); at != std::string::npos; at = text.find("M6", at + 1)) ++n;
+  return n;
+}
+std::string error_of(const test::ScratchDir& dir, const std::string& yaml) {
+  test::write_text(dir.file("job.yaml"), yaml);
+  try {
+    (void)pipeline::read_job(dir.file("job.yaml"));
+  } catch (const InputError& e) {
+    return e.what();
+  }
+  return "(accepted)";
+}
+}  // namespace
+
+TEST_CASE("the shipped tool catalogue reads: five families, standard sizes, flanks off the axis") {
+  const std::vector<pipeline::CatalogueTool> all = pipeline::read_catalogue(pipeline::tools_dir());
+  std::map<std::string, int> per_family;
+  for (const pipeline::CatalogueTool& t : all) {
+    CAPTURE(t.name);
+    ++per_family[t.family];
+    const std::vector<Eigen::Vector2d> zr = t.meridian_mm();
+    CHECK(zr.front().x() == 0);
+    CHECK(zr.back().x() == doctest::Approx(t.length_mm));
+    double rmax = 0;
+    for (const auto& p : zr) {
+      CHECK(p.y() > 0);
+      rmax = std::max(rmax, p.y());
+    }
+    if (t.family != "taper") CHECK(2 * rmax == doctest::Approx(t.diameter_mm).epsilon(1e-3));
+    else CHECK(2 * zr.front().y() == doctest::Approx(t.tip_diameter_mm));
+  }
+  for (const char* f : {"cylinder", "taper", "barrel", "lens", "oval"}) {
+    CAPTURE(f);
+    CHECK(per_family[f] >= 4);
+  }
+}
+
+TEST_CASE("tool catalogue errors name the file, the line and the key") {
+  test::ScratchDir dir("catalogue-errors");
+  const struct {
+    const char* yaml;
+    const char* expect;
+  } cases[] = {
+      {"family: cylinder\ntools:\n  - {name: a, diameter: 6, length: 20, flutes: 4}\n", ":3: tools[0].flutes: unknown key"},
+      {"family: cylinder\ntools:\n  - {name: a, length: 20}\n", ":3: tools[0].diameter: missing"},
+      {"family: drill\ntools:\n  - {name: a}\n", ":1: family: unknown family 'drill'"},
+      {"family: barrel\ntools:\n  - {name: a, diameter: 12, profile_radius: 10, length: 30}\n",
+       ":3: tools[0].profile_radius: 10 mm is too small"},
+      {"family: taper\ntools:\n  - {name: a, tip_diameter: 6, half_angle: 60, length: 30}\n",
+       ":3: tools[0].half_angle: must be in 0..45 deg"},
+      {"family: oval\ntools:\n  - {name: a, diameter: 4, profile_radius: 8, widest_at: 5, length: 12}\n",
+       ":3: tools[0]: the flank reaches the axis"},
+      {"family: cylinder\ntools:\n  - {name: a, diameter: 6, length: 20}\n  - {name: a, diameter: 8, length: 20}\n",
+       ":4: name: tool 'a' is also defined at"},
+  };
+  for (const auto& c : cases) {
+    CAPTURE(c.yaml);
+    test::write_text(dir.file("t.yaml"), c.yaml);
+    std::string msg = "(accepted)";
+    try {
+      (void)pipeline::read_catalogue(dir.path);
+    } catch (const InputError& e) {
+      msg = e.what();
+    }
+    CAPTURE(msg);
+    CHECK(msg.find(dir.file("t.yaml") + c.expect) != std::string::npos);
+  }
+}
+
+TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with file, line and key") {
+  test::ScratchDir dir("tool-keys");
+  test::write_text(dir.file("s.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const std::string rest = "surface: s.obj\npatches:\n  - name: p\n    init: line\n    line: [0, 0, 0, 0, 0, 10]\n";
+  const struct {
+    const char* tool;
+    const char* expect;
+  } cases[] = {
+      {"tool: {min_diameter: 12, max_diameter: 10}", ":1: tool.min_diameter: 12 mm is larger than tool.max_diameter"},
+      {"tool: {max_cone_angle: 95}", ":1: tool.max_cone_angle: must be in 0 .. 90 deg"},
+      {"tool: {catalogue: no-such-tool}", ":1: tool.catalogue: no tool 'no-such-tool' in the catalogue"},
+      {"tool: {catalogue: cyl-d6-l20, shape: cone}", ":1: tool.shape: not with tool.catalogue"},
+      {"tool: {catalogue: cyl-d6-l20, max_diameter: 8}", ":1: tool.max_diameter: not with tool.catalogue"},
+      {"tool: {shared: 3}", ":1: tool.shared: expected true or false"},
+      {"tool: {convex: yes, diameter: 3}", ":1: tool.diameter: unknown key"},
+      {"allowance: -0.1", ":1: allowance: must be in 0 .. 100 mm"},
+      {"overtravel: x", ":1: overtravel: expected a number"},
+      {"passes: [{allowance: 0.3}, {depth: 2}]", ":1: passes[1].depth: unknown key"},
+      {"passes: []", ":1: passes: expected a list of 1 to 20 passes"},
+      {"allowance: 0.1\npasses: [{allowance: 0}]", ":1: allowance: not with passes:"},
+  };
+  for (const auto& c : cases) {
+    CAPTURE(c.tool);
+    const std::string msg = error_of(dir, std::string(c.tool) + "\n" + rest);
+    CAPTURE(msg);
+    CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
+  }
+  for (const char* key : {"tool: {catalogue: cyl-d6-l20}", "tool: {shared: true}", "allowance: 0.2"}) {
+    CAPTURE(key);
+    const std::string msg = error_of(dir, std::string(key) + "\nsurface: s.obj\npatches: auto\n");
+    CAPTURE(msg);
+    CHECK(msg.find(dir.file("job.yaml") + ":1: ") != std::string::npos);
+    CHECK(msg.find("not with patches: auto") != std::string::npos);
+  }
+  const pipeline::Job ok = [&] {
+    test::write_text(dir.file("job.yaml"), "tool: {catalogue: barrel-d16-r150-l40, shared: true}\nallowance: 0.3\n" + rest);
+    return pipeline::read_job(dir.file("job.yaml"));
+  }();
+  REQUIRE(ok.tool.catalogue);
+  CHECK(ok.tool.catalogue->family == "barrel");
+  CHECK(ok.tool.catalogue->profile_radius_mm == 150);
+  CHECK(ok.tool.shared);
+  CHECK(ok.allowance_mm == 0.3);
+}
+
+TEST_CASE("a catalogue tool fitted to its own exact envelope is recovered: coverage >= 95% within 1e-4 of the diagonal") {
+  test::ScratchDir dir("catalogue-fit");
+  const pipeline::CatalogueTool cat = pipeline::find_catalogue_tool(pipeline::tools_dir(), "barrel-d16-r150-l40");
+  // The envelope of the catalogue tool's canal surface (the sphere radii flankcam fits with).
+  const ToolRadius truth = tool_from_meridian(cat.meridian_mm(), 12);
+  const EnvelopeJob e = envelope_job(dir, "arc", truth.profile(), cat.length_mm);
+  const double tol_mm = 1e-4 * e.diagonal_mm;
+  const pipeline::FitRun run = fit_job_file(
+      dir, fmt::format("surface: surface.obj\ntool: {{catalogue: {}}}\ntolerance: {}\npatches:\n", cat.name, tol_mm) +
+               patch_yaml(e, "cat", {0, 0.25, 0.5, 0.75, 1}));
+  REQUIRE(run.fitted.patches.size() == 1);
+  const pipeline::FittedPatch& p = run.fitted.patches[0];
+  MESSAGE("catalogue " << cat.name << ": eps " << run.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max) << " mm, coverage "
+                       << p.fit.coverage << " within " << tol_mm << " mm; custom tool: eps " << p.custom->eps_mm
+                       << " mm, coverage " << p.custom->coverage);
+  CHECK(p.fit.coverage >= 0.95);
+  // The tool is the catalogue's: the fitted meridian is the barrel (Ø16 in the middle, 40 mm long).
+  const ToolDimensions dims = tool_dimensions(p.profile_mm);
+  CHECK(dims.diameter_max_mm == doctest::Approx(16).epsilon(1e-3));
+  CHECK(p.assembly.cutter_length() == doctest::Approx(40).epsilon(1e-9));
+  // The report compares it with the best custom tool on the same patch.
+  REQUIRE(p.custom);
+  CHECK(p.custom->coverage > 0);
+  const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
+  CHECK(j["tool"]["catalogue"]["name"] == cat.name);
+  CHECK(j["compare_custom_tool"]["catalogue"]["coverage"] == p.fit.coverage);
+  CHECK(j["compare_custom_tool"]["custom"]["eps_mm"].get<double>() == doctest::Approx(p.custom->eps_mm).epsilon(1e-6));
+}
+
+TEST_CASE("a job's tool limits hold on every fitted meridian, and the grinding sheet states them") {
+  test::ScratchDir dir("tool-limits");
+  // Barrel: Ø12 at the ends, Ø15 in the middle, 40 mm, 8.5 deg at the ends; the limits cut into all of it.
+  const EnvelopeJob e = envelope_job(dir, "twist", barrel_profile(6, 1.5), 40);
+  const pipeline::FitRun run = fit_job_file(
+      dir, "surface: surface.obj\ntolerance: 0.05\n"
+           "tool: {min_diameter: 11, max_diameter: 14, max_length: 35, min_tip_diameter: 12.5, max_cone_angle: 5, convex: true}\n"
+           "patches:\n" + patch_yaml(e, "a", {0, 0.5, 1}) + patch_yaml(e, "b", {0.2, 0.5, 0.8}));
+  for (const pipeline::FittedPatch& p : run.fitted.patches) {
+    CAPTURE(p.job->name);
+    const ToolDimensions d = tool_dimensions(p.profile_mm);
+    double steepest = 0;
+    for (size_t i = 1; i < p.profile_mm.size(); ++i) {
+      const Eigen::Vector2d s = p.profile_mm[i] - p.profile_mm[i - 1];
+      steepest = std::max(steepest, std::atan2(std::abs(s.y()), s.x()) * 180 / M_PI);
+    }
+    MESSAGE(p.job->name << ": D " << d.diameter_min_mm << ".." << d.diameter_max_mm << " tip " << 2 * p.profile_mm.front().y()
+                        << " L " << d.length_mm << " steepest " << steepest << " deg, eps "
+                        << run.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max) << " mm, coverage " << p.fit.coverage);
+    CHECK(d.diameter_min_mm >= 11 - 1e-6);
+    CHECK(d.diameter_max_mm <= 14 + 1e-6);
+    CHECK(d.length_mm <= 35 + 1e-6);
+    CHECK(2 * p.profile_mm.front().y() >= 12.5 - 1e-6);
+    CHECK(steepest <= 5 + 1e-6);
+    const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
+    CHECK(j["tool"]["constraints"]["met"] == true);
+    CHECK(j["coverage"].get<double>() > 0);
+    // Grinding sheet: dimensions first, then one row per profile point (z, r, diameter, half angle).
+    std::istringstream sheet(pipeline::tool_sheet(run.job, p));
+    std::map<std::string, double> value;
+    std::vector<std::array<double, 4>> rows;
+    std::string line;
+    while (std::getline(sheet, line)) {
+      if (line.empty() || line[0] == '#' || line.rfind("point,", 0) == 0) continue;
+      std::vector<std::string> cells;
+      std::stringstream ls(line);
+      for (std::string c; std::getline(ls, c, ',');) cells.push_back(c);
+      if (cells.size() == 2) value[cells[0]] = std::stod(cells[1]);
+      if (cells.size() == 5) rows.push_back({std::stod(cells[1]), std::stod(cells[2]), std::stod(cells[3]), std::stod(cells[4])});
+    }
+    CHECK(value["tolerance_mm"] == 0.05);
+    CHECK(value["max_diameter_mm"] == doctest::Approx(d.diameter_max_mm).epsilon(1e-4));
+    CHECK(value["min_diameter_mm"] == doctest::Approx(d.diameter_min_mm).epsilon(1e-4));
+    CHECK(value["cutting_length_mm"] == doctest::Approx(d.length_mm).epsilon(1e-4));
+    CHECK(value["steepest_half_angle_deg"] <= 5 + 1e-3);
+    REQUIRE(rows.size() == p.profile_mm.size());
+    for (size_t i = 0; i < rows.size(); ++i) {
+      CHECK(rows[i][0] == doctest::Approx(p.profile_mm[i].x()).epsilon(1e-4));
+      CHECK(rows[i][2] == doctest::Approx(2 * rows[i][1]).epsilon(1e-4));
+    }
+  }
+}
+
+TEST_CASE("tool: {shared: true} gives two patches one identical meridian, each within the tolerance") {
+  test::ScratchDir dir("shared-tool");
+  const EnvelopeJob e = envelope_job(dir, "twist", barrel_profile(6, 1.5), 40);
+  const double tol_mm = 2e-5 * e.diagonal_mm;  // 0.0026 mm
+  const std::string patches = "patches:\n" + patch_yaml(e, "first", {0, 0.25, 0.5}) + patch_yaml(e, "second", {0.5, 0.75, 1});
+  const pipeline::FitRun separate = fit_job_file(dir, fmt::format("surface: surface.obj\ntolerance: {}\n", tol_mm) + patches);
+  const pipeline::FitRun shared =
+      fit_job_file(dir, fmt::format("surface: surface.obj\ntolerance: {}\ntool: {{shared: true}}\n", tol_mm) + patches);
+  REQUIRE(shared.fitted.patches.size() == 2);
+  const auto& a = shared.fitted.patches[0];
+  const auto& b = shared.fitted.patches[1];
+  CHECK(a.fit.fit.tool.D == b.fit.fit.tool.D);
+  CHECK(a.profile_mm == b.profile_mm);
+  CHECK(separate.fitted.patches[0].profile_mm != separate.fitted.patches[1].profile_mm);
+  for (const auto* run : {&separate, &shared})
+    for (const pipeline::FittedPatch& p : run->fitted.patches) {
+      const double eps_mm = run->fitted.frame.length_to_mm(p.fit.fit.eps_opt.max);
+      MESSAGE(std::string(run == &shared ? "shared " : "separate ") << p.job->name << ": eps " << eps_mm << " mm (tolerance " << tol_mm
+                                                          << "), coverage " << p.fit.coverage);
+      CHECK(eps_mm <= tol_mm);
+    }
+}
+
+TEST_CASE("allowance: 0.2 leaves 0.2 mm of stock within the tolerance wherever the tool cuts") {
+  test::ScratchDir dir("allowance");
+  const EnvelopeJob e = envelope_job(dir, "arc", cone_profile(6, 9), 40);
+  const double tol = 0.01;
+  const pipeline::FitRun run = fit_job_file(
+      dir, fmt::format("surface: surface.obj\ntolerance: {}\nallowance: 0.2\ntool: {{shape: cone}}\npatches:\n", tol) +
+               patch_yaml(e, "semi", {0, 0.25, 0.5, 0.75, 1}));
+  const pipeline::FittedPatch& p = run.fitted.patches.at(0);
+  // The machined surface against the design surface itself (not the fit's offset target).
+  const SurfaceIndex design(run.fitted.unit_surface);
+  const MachinedSurface ms = machined_surface(design, p.fit.fit.rails, p.fit.fit.tool);
+  const std::vector<double> area = [&] {
+    std::vector<double> a(run.fitted.unit_surface.vertices.size(), 0.0);
+    for (const auto& f : run.fitted.unit_surface.faces) {
+      const auto& v = run.fitted.unit_surface.vertices;
+      const double fa = 0.5 * (v[size_t(f[1])] - v[size_t(f[0])]).cross(v[size_t(f[2])] - v[size_t(f[0])]).norm() / 3;
+      for (int k = 0; k < 3; ++k) a[size_t(f[k])] += fa;
+    }
+    return a;
+  }();
+  double reached = 0, within = 0, total = 0, lo = INFINITY, hi = -INFINITY;
+  for (size_t v = 0; v < ms.design_deviation.size(); ++v) {
+    total += area[v];
+    const double d = ms.design_deviation[v];
+    if (!std::isfinite(d)) continue;
+    const double mm = run.fitted.frame.length_to_mm(d);
+    reached += area[v];
+    if (std::abs(mm - 0.2) <= tol) within += area[v];
+    lo = std::min(lo, mm), hi = std::max(hi, mm);
+  }
+  MESSAGE("stock left: " << lo << " .. " << hi << " mm; " << within / reached << " of the reached area within 0.2 +- " << tol
+                         << " mm; reached " << reached / total << "; coverage of the offset target " << p.fit.coverage);
+  CHECK(reached / total > 0.9);
+  CHECK(within / reached >= 0.95);
+  CHECK(lo >= 0.2 - tol);  // nowhere does the semi-finishing pass cut into the last 0.2 mm beyond the tolerance
+  const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
+  CHECK(j["allowance"]["allowance_mm"] == 0.2);
+}
+
+TEST_CASE("overtravel continues the motion by that many mm beyond both ends along the direction of travel") {
+  test::ScratchDir dir("overtravel");
+  const EnvelopeJob e = envelope_job(dir, "arc", cylinder_profile(6), 40);
+  const std::string rest = "tool: {shape: cylinder}\npatches:\n" + patch_yaml(e, "p", {0, 0.5, 1});
+  const pipeline::FitRun plain = fit_job_file(dir, "surface: surface.obj\n" + rest);
+  const pipeline::FitRun over = fit_job_file(dir, "surface: surface.obj\novertravel: 7.5\n" + rest);
+  const auto& a = plain.fitted.patches.at(0).poses;
+  const auto& b = over.fitted.patches.at(0).poses;
+  REQUIRE(b.size() == a.size() + 2);
+  for (size_t i = 0; i < a.size(); ++i) CHECK((b[i + 1].tip - a[i].tip).norm() < 1e-12);
+  CHECK((b.front().tip - a.front().tip).norm() == doctest::Approx(7.5));
+  CHECK((b.back().tip - a.back().tip).norm() == doctest::Approx(7.5));
+  CHECK((b.front().tip - a.front().tip).dot(a[1].tip - a[0].tip) < 0);  // before the start, not back over the surface
+  CHECK((b.back().tip - a.back().tip).dot(a.back().tip - a[a.size() - 2].tip) > 0);
+  CHECK(b.front().axis == a.front().axis);
+}
+
+TEST_CASE("passes: each pass is its own section of the patch's program, in order, the earlier one 0.3 mm off") {
+  test::ScratchDir dir("passes");
+  const std::string ex = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/";
+  const std::string job = "surface: " + ex + "blade.obj\ntool: {shape: cone}\ntolerance: 0.015\nsampling: {s: 20, t: 60}\n"
+                          "passes: [{allowance: 0.3}, {allowance: 0}]\nmachine: xyzbc-head-table\npost: {dialects: [iso]}\n"
+                          "patches:\n  - name: two-pass\n    init: lines\n    lines:\n"
+                          "      - [5.350, 10.342, -1.086, 0.669, 10.353, 60.944]\n"
+                          "      - [10.691, 10.006, -1.233, 4.819, 11.629, 60.825]\n"
+                          "      - [15.884, 9.359, -1.377, 8.927, 12.621, 60.707]\n";
+  test::write_text(dir.file("job.yaml"), job);
+  pipeline::Job j = pipeline::read_job(dir.file("job.yaml"));
+  REQUIRE(j.passes_mm == std::vector<double>{0.3, 0});
+  const Machine machine = pipeline::check_run(j);
+  const pipeline::RunResult run = pipeline::run(std::move(j), machine, {});
+  const pipeline::FittedPatch& p = run.fit.fitted.patches.at(0);
+  REQUIRE(p.earlier_passes.size() == 1);
+  const pipeline::PassMotion& rough = p.earlier_passes[0];
+  // The earlier pass stands 0.3 mm farther from the design surface, pose by pose (same tool).
+  const SurfaceIndex design(run.fit.fitted.surface.mesh);
+  const double half = 0.5 * p.assembly.cutter_length();
+  REQUIRE(rough.poses.size() == p.poses.size());
+  double worst = 0;
+  for (size_t i = 0; i < p.poses.size(); ++i) {
+    const double d_final = design.closest(p.poses[i].tip + half * p.poses[i].axis).distance;
+    const double d_rough = design.closest(rough.poses[i].tip + half * rough.poses[i].axis).distance;
+    worst = std::max(worst, std::abs(d_rough - d_final - 0.3));
+  }
+  MESSAGE("pass 1 (allowance 0.3): eps " << rough.eps_mm << " mm, coverage " << rough.coverage << "; final pass eps "
+                                         << run.fit.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max) << " mm; offset error "
+                                         << worst << " mm");
+  CHECK(worst < 0.015);
+  // One program for the patch with two sections, the 0.3 mm pass first.
+  int programs = 0;
+  for (const pipeline::PostedProgram& w : run.programs) {
+    if (w.patch != "two-pass") continue;
+    ++programs;
+    REQUIRE(w.posted.sections.size() == 2);
+    CHECK(w.posted.sections[0].first_block < w.posted.sections[1].first_block);
+    const std::string text = nc_text(w.posted.program, {w.dialect, false, 0.005});
+    const size_t rough_at = text.find("ALLOWANCE 0.3"), finish_at = text.find("FLANKCAM FIT OF");
+    REQUIRE(rough_at != std::string::npos);
+    REQUIRE(finish_at != std::string::npos);
+    CHECK(rough_at < finish_at);
+    CHECK(count_m6(text) == 1);
+  }
+  CHECK(programs == 1);
+  const nlohmann::ordered_json r = pipeline::patch_report(run.fit.job, run.fit.fitted, p);
+  REQUIRE(r["passes"].size() == 2);
+  CHECK(r["passes"][0]["allowance_mm"] == 0.3);
+  CHECK(r["passes"][1]["allowance_mm"] == 0);
+}
