@@ -4,6 +4,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <limits>
 #include <numeric>
@@ -212,6 +213,7 @@ struct SurfaceIndex::Impl {
   std::vector<LeafBound> bounds;            // per leaf: bounds[slot / kLeafFaces]
   double slack = 0;                         // absolute rounding allowance of the box bounds
   double coordinate_bound = 0;              // largest |coordinate| of a vertex
+  BoundingBox box;                          // of the vertices (orders batch queries)
 
   double face_distance2(int f, const Eigen::Vector3d& p) const {
     const auto& F = mesh.faces[f];
@@ -466,7 +468,8 @@ int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
   const auto bound = [&](double b2) {
     const double b = std::sqrt(b2) + slack;
     const double r2 = b * b * (1 + 1e-12) * (1 + kFrameError) * (1 + kFloatError);
-    return r2 < std::numeric_limits<float>::max() ? std::nextafter(float(r2), INFINITY) : INFINITY;
+    // float(r2) may round down by half an ulp (2^-24 relative): raised by 2^-22.
+    return r2 < 1e38 ? float(r2) * (1.0F + 0x1p-22F) : INFINITY;
   };
   float prune2 = INFINITY;
   const float x = float(p.x()), y = float(p.y()), z = float(p.z());
@@ -474,6 +477,17 @@ int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
   // The leaf bounds subtract n.a and u.corner (|.| <= 2 coordinate_bound) instead of a centre.
   const float leaf_margin = float(kFloatError * (std::abs(p.x()) + std::abs(p.y()) + std::abs(p.z()) + 2 * coordinate_bound));
   const Node4* W = wide.data();
+  // Every child that may be visited is fetched while its siblings are bounded: on big meshes the
+  // search waits on memory, not arithmetic.
+  const auto prefetch = [&](int child) {
+    const auto lines = [](const void* p, size_t bytes) {
+      for (size_t b = 0; b < bytes; b += 64) __builtin_prefetch(static_cast<const char*>(p) + b);
+    };
+    if (child >= 0) return lines(W + child, sizeof(Node4));
+    const int first = (~child) >> 3;
+    lines(&bounds[size_t(first / kLeafFaces)], sizeof(LeafBound));
+    lines(&tri[size_t(first)], sizeof(LeafFace) * size_t((~child) & 7));
+  };
   stack[top++] = {0, 0.0F};
   while (top > 0) {
     const Entry en = stack[--top];
@@ -507,10 +521,10 @@ int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
         order[i] = j;
       }
       if (n == 0) break;
-      for (int i = n - 1; i > 0; --i) {
+      for (int i = n - 1; i >= 0; --i) {
         const int child = w.link[order[i]];
-        if (child >= 0) __builtin_prefetch(W + child);
-        stack[top++] = {child, d2[order[i]]};
+        prefetch(child);
+        if (i > 0) stack[top++] = {child, d2[order[i]]};
       }
       link = w.link[order[0]];
     }
@@ -526,6 +540,7 @@ SurfaceIndex::SurfaceIndex(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
   for (const auto& F : s.mesh.faces)
     s.cover = std::max(s.cover, covering_radius_of(s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])],
                                                    s.mesh.vertices[size_t(F[2])]));
+  s.box = bounding_box(s.mesh.vertices);
   if (!s.mesh.faces.empty()) s.build();
 }
 
@@ -542,11 +557,39 @@ Footpoint SurfaceIndex::closest(const Eigen::Vector3d& p) const {
   return impl_->make_footpoint(p, T.face, closest_on_triangle(p, T.a, T.b, T.c), T.boundary);
 }
 
+namespace {
+// Spreads the low 21 bits of x to every third bit (Morton code).
+uint64_t spread3(uint64_t x) {
+  x &= 0x1fffff;
+  x = (x | x << 32) & 0x1f00000000ffffULL;
+  x = (x | x << 16) & 0x1f0000ff0000ffULL;
+  x = (x | x << 8) & 0x100f00f00f00f00fULL;
+  x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+  x = (x | x << 2) & 0x1249249249249249ULL;
+  return x;
+}
+}  // namespace
+
 std::vector<Footpoint> SurfaceIndex::closest(const std::vector<Eigen::Vector3d>& points) const {
   std::vector<Footpoint> out(points.size());
   const long n = long(points.size());
+  // Queries are answered in Morton order of their position in the mesh's bounding box, so that
+  // neighbouring queries (on one thread) walk the same nodes while they are in cache; each answer
+  // is independent of the order, so out[i] is the same footpoint as closest(points[i]).
+  std::vector<std::pair<uint64_t, long>> order(static_cast<size_t>(n));
+  const Eigen::Vector3d lo = impl_->box.min, size = (impl_->box.max - impl_->box.min).cwiseMax(1e-300);
+  for (long i = 0; i < n; ++i) {
+    uint64_t code = 0;
+    if (points[size_t(i)].allFinite())
+      for (int k = 0; k < 3; ++k) {
+        const double f = std::clamp((points[size_t(i)][k] - lo[k]) / size[k], 0.0, 1.0);
+        code |= spread3(uint64_t(f * 2097151.0)) << k;
+      }
+    order[size_t(i)] = {code, i};
+  }
+  if (n > 1024) std::sort(order.begin(), order.end());
 #pragma omp parallel for schedule(static) if (n > 256)
-  for (long i = 0; i < n; ++i) out[i] = closest(points[i]);
+  for (long j = 0; j < n; ++j) out[size_t(order[size_t(j)].second)] = closest(points[size_t(order[size_t(j)].second)]);
   return out;
 }
 
