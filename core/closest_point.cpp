@@ -67,7 +67,8 @@ struct Node {
   float R[9];     // rows: the principal axes, rounded to float (the extents are measured in this frame)
   float m[3];     // centre of the box in that frame
   float e[3];     // half extents, rounded up
-  int link = 0;   // inner: index of the left child (right = link + 1); leaf: ~(first slot * 8 + count)
+  int link = 0;   // inner: index of the left child; leaf: ~(first slot * 8 + count)
+  int right = 0;  // inner: index of the right child
   int faces = 0;  // number of faces below
   [[nodiscard]] bool leaf() const { return link < 0; }
 };
@@ -264,7 +265,10 @@ void SurfaceIndex::Impl::build() {
   std::vector<std::pair<double, int>> order(static_cast<size_t>(nf));
   std::vector<Eigen::Vector3d> centroid(static_cast<size_t>(nf));
   double scale = 0;
-  for (const auto& v : mesh.vertices) scale = std::max(scale, v.cwiseAbs().maxCoeff());
+  const long nv = long(mesh.vertices.size());
+#pragma omp parallel for schedule(static) reduction(max : scale) if (nv > 20000)
+  for (long v = 0; v < nv; ++v) scale = std::max(scale, mesh.vertices[size_t(v)].cwiseAbs().maxCoeff());
+#pragma omp parallel for schedule(static) if (nf > 20000)
   for (int f = 0; f < nf; ++f) {
     const auto& F = mesh.faces[size_t(f)];
     centroid[size_t(f)] = (mesh.vertices[size_t(F[0])] + mesh.vertices[size_t(F[1])] + mesh.vertices[size_t(F[2])]) / 3;
@@ -274,8 +278,6 @@ void SurfaceIndex::Impl::build() {
   // the triangle distances, so a box never prunes a face brute force would pick.
   slack = 1e-12 * scale + std::numeric_limits<double>::min();
   coordinate_bound = scale;
-  nodes.reserve(size_t(2 * (nf / kLeafFaces + 1)));
-  tri.reserve(size_t(nf));
   std::vector<char> merge;  // per node: extents from the children
 
   // Stores the frame R (rounded to float) and the extents of `points` in it, widened for rounding.
@@ -298,16 +300,20 @@ void SurfaceIndex::Impl::build() {
     }
   };
 
+  // Preorder layout fixed by the face counts alone: a subtree of c faces has 2 ceil(c / kLeafFaces) - 1
+  // nodes (every leaf but the last is full), its left child follows it and its right child follows
+  // the left subtree; a leaf's slots start at its first face's position. So every subtree's nodes
+  // and slots are known before it is built, and subtrees are built in parallel with the same result.
+  const int leaves = (nf + kLeafFaces - 1) / kLeafFaces;
+  nodes.resize(size_t(2 * leaves - 1));
+  merge.assign(nodes.size(), 0);
+  tri.resize(size_t(leaves) * kLeafFaces);
+  bounds.resize(size_t(leaves));
   struct Range {
     int node, begin, end;
   };
-  std::vector<Range> todo;
-  nodes.emplace_back();
-  merge.push_back(0);
-  todo.push_back({0, 0, nf});
-  while (!todo.empty()) {
-    const Range r = todo.back();
-    todo.pop_back();
+  // Builds the node of r and returns its children's ranges in `todo`.
+  const auto step = [&](const Range r, std::vector<Range>& todo) {
     const int count = r.end - r.begin;
     nodes[size_t(r.node)].faces = count;
     const int stride = std::max(1, count / 64);
@@ -346,7 +352,7 @@ void SurfaceIndex::Impl::build() {
     }
     if (count <= kLeafFaces) {
       Node& node = nodes[size_t(r.node)];
-      node.link = ~(int(tri.size()) * 8 + count);  // tri.size() is a multiple of kLeafFaces
+      node.link = ~(r.begin * 8 + count);  // r.begin is a multiple of kLeafFaces
       std::sort(order.begin() + r.begin, order.begin() + r.end,
                 [](const auto& x, const auto& y) { return x.second < y.second; });
       LeafBound bound;
@@ -358,12 +364,11 @@ void SurfaceIndex::Impl::build() {
         t.a = mesh.vertices[size_t(F[0])], t.b = mesh.vertices[size_t(F[1])], t.c = mesh.vertices[size_t(F[2])];
         t.face = f;
         t.boundary = boundary_flags(f);
-        tri.push_back(t);
+        tri[size_t(k)] = t;
         set_lane(bound, j, t);
       }
-      bounds.push_back(bound);
-      tri.resize(tri.size() + size_t(kLeafFaces - count));  // each leaf has kLeafFaces slots
-      continue;
+      bounds[size_t(r.begin / kLeafFaces)] = bound;
+      return;
     }
     // Split at the median along the box's longest axis (the axis of largest variance on big nodes).
     int axis = 0;
@@ -373,23 +378,38 @@ void SurfaceIndex::Impl::build() {
     // The left part is a multiple of kLeafFaces, so only the last leaf is not full.
     const int mid = r.begin + kLeafFaces * ((count + kLeafFaces - 1) / kLeafFaces / 2);
     std::nth_element(order.begin() + r.begin, order.begin() + mid, order.begin() + r.end);
-    const int left = int(nodes.size());
+    const int left = r.node + 1, right = r.node + (mid - r.begin) / 2;  // 2 (mid - begin) / 4 - 1 nodes on the left
     nodes[size_t(r.node)].link = left;
-    nodes.emplace_back();
-    nodes.emplace_back();
-    merge.push_back(0);
-    merge.push_back(0);
-    todo.push_back({left + 1, mid, r.end});
+    nodes[size_t(r.node)].right = right;
+    todo.push_back({right, mid, r.end});
     todo.push_back({left, r.begin, mid});
+  };
+  // The top of the tree serially, then its subtrees of at most `grain` faces on all threads.
+  const int grain = std::max(4096, nf / 64);
+  std::vector<Range> todo{{0, 0, nf}}, deferred;
+  while (!todo.empty()) {
+    const Range r = todo.back();
+    todo.pop_back();
+    if (r.end - r.begin <= grain && nf > 4 * grain) deferred.push_back(r);
+    else step(r, todo);
+  }
+#pragma omp parallel for schedule(dynamic, 1)
+  for (long i = 0; i < long(deferred.size()); ++i) {
+    std::vector<Range> local{deferred[size_t(i)]};
+    while (!local.empty()) {
+      const Range r = local.back();
+      local.pop_back();
+      step(r, local);
+    }
   }
   // Children have higher indices than their parent: enclose the children's corners bottom-up.
   for (int i = int(nodes.size()) - 1; i >= 0; --i) {
     if (!merge[size_t(i)]) continue;
     Eigen::Matrix3d R;
     for (int k = 0; k < 9; ++k) R(k / 3, k % 3) = double(nodes[size_t(i)].R[k]);
-    const int l = nodes[size_t(i)].link;
+    const int l = nodes[size_t(i)].link, rc = nodes[size_t(i)].right;
     set_box(nodes[size_t(i)], R, [&](const auto& f) {
-      for (int c : {l, l + 1}) {
+      for (int c : {l, rc}) {
         const Node& ch = nodes[size_t(c)];
         Eigen::Matrix3d Rc;
         for (int k = 0; k < 9; ++k) Rc(k / 3, k % 3) = double(ch.R[k]);
@@ -417,9 +437,10 @@ void SurfaceIndex::Impl::build() {
               (expand < 0 || nodes[size_t(lanes[size_t(j)])].faces > nodes[size_t(lanes[size_t(expand)])].faces))
             expand = j;
       if (expand < 0) break;
-      const int l = nodes[size_t(lanes[size_t(expand)])].link;
+      const Node& b = nodes[size_t(lanes[size_t(expand)])];
+      const int l = b.link, rc = b.right;
       lanes[size_t(expand)] = l;
-      lanes.insert(lanes.begin() + expand + 1, l + 1);
+      lanes.insert(lanes.begin() + expand + 1, rc);
     }
     const int index = int(wide.size());
     wide.emplace_back();
@@ -438,12 +459,13 @@ void SurfaceIndex::Impl::build() {
     }
     for (int j = 0; j < int(lanes.size()); ++j)
       if (!nodes[size_t(lanes[size_t(j)])].leaf()) {
-        const int child = self(self, std::vector<int>{nodes[size_t(lanes[size_t(j)])].link, nodes[size_t(lanes[size_t(j)])].link + 1});
+        const Node& b = nodes[size_t(lanes[size_t(j)])];
+        const int child = self(self, std::vector<int>{b.link, b.right});
         wide[size_t(index)].link[j] = child;
       }
     return index;
   };
-  collapse(collapse, nodes[0].leaf() ? std::vector<int>{0} : std::vector<int>{nodes[0].link, nodes[0].link + 1});
+  collapse(collapse, nodes[0].leaf() ? std::vector<int>{0} : std::vector<int>{nodes[0].link, nodes[0].right});
 }
 
 // Ordered depth-first search: the nearer children first, a child is skipped when its box is
@@ -537,9 +559,15 @@ SurfaceIndex::SurfaceIndex(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
   s.mesh = std::move(mesh);
   s.normals = vertex_normals(s.mesh);
   s.topology = mesh_topology(s.mesh);
-  for (const auto& F : s.mesh.faces)
-    s.cover = std::max(s.cover, covering_radius_of(s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])],
-                                                   s.mesh.vertices[size_t(F[2])]));
+  const long nf = long(s.mesh.faces.size());
+  double cover = 0;
+#pragma omp parallel for schedule(static) reduction(max : cover) if (nf > 20000)
+  for (long f = 0; f < nf; ++f) {
+    const auto& F = s.mesh.faces[size_t(f)];
+    cover = std::max(cover, covering_radius_of(s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])],
+                                               s.mesh.vertices[size_t(F[2])]));
+  }
+  s.cover = cover;
   s.box = bounding_box(s.mesh.vertices);
   if (!s.mesh.faces.empty()) s.build();
 }
