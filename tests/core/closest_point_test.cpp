@@ -1,6 +1,7 @@
 #include "core/closest_point.h"
 
 #include <doctest/doctest.h>
+#include <omp.h>
 
 #include <cmath>
 #include <limits>
@@ -211,4 +212,29 @@ TEST_CASE("closest points equal brute force far from the origin, at tiny scale a
     check_matches_brute_force(index, random_points(m, 20, 300, 10));
     check_matches_brute_force(index, offset_points(m, 0.0, 50, 11));
   }
+}
+
+TEST_CASE("the index of a 40k-face mesh is the same on 1 and 2 threads: normals, topology, footpoints") {
+  // Big enough for every parallel part of the build (normals, edge sorting, subtrees of the tree).
+  const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), 60, 350, 1);
+  const TriMesh mesh = transformed(g.mesh, unit_diagonal_frame(g.mesh));
+  REQUIRE(mesh.faces.size() > 40000);
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const SurfaceIndex one(mesh);
+  omp_set_num_threads(2);
+  const SurfaceIndex two(mesh);
+  omp_set_num_threads(threads);
+  CHECK(one.normals() == two.normals());
+  CHECK(one.normals() == vertex_normals(mesh));
+  CHECK(one.topology().boundary_edge == two.topology().boundary_edge);
+  CHECK(one.topology().component == two.topology().component);
+  CHECK(one.covering_radius() == two.covering_radius());
+  const auto queries = offset_points(mesh, 0.05, 2000, 31);
+  const auto a = one.closest(queries), b = two.closest(queries);
+  int differ = 0;
+  for (size_t i = 0; i < queries.size(); ++i)
+    if (a[i].face != b[i].face || a[i].point != b[i].point || a[i].normal != b[i].normal) ++differ;
+  CHECK(differ == 0);
+  check_matches_brute_force(one, std::vector<Eigen::Vector3d>(queries.begin(), queries.begin() + 100));
 }
