@@ -255,11 +255,11 @@ struct SurfaceIndex::Impl {
 };
 
 // Top-down: each node's axes are the principal axes of its faces' corners (of at most 64 faces),
-// split at the median centroid along the axis of largest spread. Nodes of up to kExactFaces faces measure their extents on the corners; bigger ones enclose their children's
-// boxes (8 corners each, bottom-up), which is looser but costs O(1) per node. Deterministic: the
-// median is found on (projection, face index) pairs.
+// its extents are measured on all its corners (exact boxes at every level: loose upper boxes
+// cost far more queries than the O(n log n) build), and it is split at the median centroid along
+// its longest axis. Deterministic: the median is found on (projection, face index) pairs, and the
+// extents are minima and maxima (the same whatever the threads).
 void SurfaceIndex::Impl::build() {
-  constexpr int kExactFaces = 4096;
   const int nf = int(mesh.faces.size());
   std::vector<Node> nodes;  // the binary tree; nodes[0] is the root
   std::vector<std::pair<double, int>> order(static_cast<size_t>(nf));
@@ -278,18 +278,20 @@ void SurfaceIndex::Impl::build() {
   // the triangle distances, so a box never prunes a face brute force would pick.
   slack = 1e-12 * scale + std::numeric_limits<double>::min();
   coordinate_bound = scale;
-  std::vector<char> merge;  // per node: extents from the children
-
-  // Stores the frame R (rounded to float) and the extents of `points` in it, widened for rounding.
-  const auto set_box = [&](Node& node, const Eigen::Matrix3d& R, const auto& for_each_point) {
+  // Stores the frame R (rounded to float) and the extents in it of the corners of the faces
+  // order[begin, end), widened for rounding. Big ranges (the top of the tree) on all threads.
+  const auto set_box = [&](Node& node, const Eigen::Matrix3d& R, int begin, int end) {
     Eigen::Matrix3d Rf;
     for (int i = 0; i < 9; ++i) node.R[i] = float(R(i / 3, i % 3)), Rf(i / 3, i % 3) = double(node.R[i]);
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
-    for_each_point([&](const Eigen::Vector3d& x) {
-      const Eigen::Vector3d l = Rf * x;
-      lo = lo.cwiseMin(l);
-      hi = hi.cwiseMax(l);
-    });
+    double lo0 = INFINITY, lo1 = INFINITY, lo2 = INFINITY, hi0 = -INFINITY, hi1 = -INFINITY, hi2 = -INFINITY;
+#pragma omp parallel for schedule(static) reduction(min : lo0, lo1, lo2) reduction(max : hi0, hi1, hi2) if (end - begin > 65536)
+    for (int k = begin; k < end; ++k)
+      for (int v : mesh.faces[size_t(order[size_t(k)].second)]) {
+        const Eigen::Vector3d l = Rf * mesh.vertices[size_t(v)];
+        lo0 = std::min(lo0, l[0]), lo1 = std::min(lo1, l[1]), lo2 = std::min(lo2, l[2]);
+        hi0 = std::max(hi0, l[0]), hi1 = std::max(hi1, l[1]), hi2 = std::max(hi2, l[2]);
+      }
+    const Eigen::Vector3d lo(lo0, lo1, lo2), hi(hi0, hi1, hi2);
     for (int k = 0; k < 3; ++k) {
       node.m[k] = float(0.5 * (lo[k] + hi[k]));
       const double half = std::max(hi[k] - double(node.m[k]), double(node.m[k]) - lo[k]);
@@ -306,7 +308,6 @@ void SurfaceIndex::Impl::build() {
   // and slots are known before it is built, and subtrees are built in parallel with the same result.
   const int leaves = (nf + kLeafFaces - 1) / kLeafFaces;
   nodes.resize(size_t(2 * leaves - 1));
-  merge.assign(nodes.size(), 0);
   tri.resize(size_t(leaves) * kLeafFaces);
   bounds.resize(size_t(leaves));
   struct Range {
@@ -340,16 +341,7 @@ void SurfaceIndex::Impl::build() {
       Rn.row(1) = Rn.row(2).cross(Rn.row(0)).normalized();
       if (Rn.allFinite()) R = Rn;
     }
-    const auto corners = [&](const auto& f) {
-      for (int k = r.begin; k < r.end; ++k)
-        for (int v : mesh.faces[size_t(order[size_t(k)].second)]) f(mesh.vertices[size_t(v)]);
-    };
-    if (count <= kExactFaces) {
-      set_box(nodes[size_t(r.node)], R, corners);
-    } else {
-      for (int i = 0; i < 9; ++i) nodes[size_t(r.node)].R[i] = float(R(i / 3, i % 3));
-      merge[size_t(r.node)] = 1;
-    }
+    set_box(nodes[size_t(r.node)], R, r.begin, r.end);
     if (count <= kLeafFaces) {
       Node& node = nodes[size_t(r.node)];
       node.link = ~(r.begin * 8 + count);  // r.begin is a multiple of kLeafFaces
@@ -370,9 +362,9 @@ void SurfaceIndex::Impl::build() {
       bounds[size_t(r.begin / kLeafFaces)] = bound;
       return;
     }
-    // Split at the median along the box's longest axis (the axis of largest variance on big nodes).
+    // Split at the median along the box's longest axis.
     int axis = 0;
-    if (count <= kExactFaces) Eigen::Vector3f(nodes[size_t(r.node)].e[0], nodes[size_t(r.node)].e[1], nodes[size_t(r.node)].e[2]).maxCoeff(&axis);
+    Eigen::Vector3f(nodes[size_t(r.node)].e[0], nodes[size_t(r.node)].e[1], nodes[size_t(r.node)].e[2]).maxCoeff(&axis);
     const Eigen::RowVector3d dir = R.row(axis);
     for (int k = r.begin; k < r.end; ++k) order[size_t(k)].first = dir.dot(centroid[size_t(order[size_t(k)].second)]);
     // The left part is a multiple of kLeafFaces, so only the last leaf is not full.
@@ -401,29 +393,6 @@ void SurfaceIndex::Impl::build() {
       local.pop_back();
       step(r, local);
     }
-  }
-  // Children have higher indices than their parent: enclose the children's corners bottom-up.
-  for (int i = int(nodes.size()) - 1; i >= 0; --i) {
-    if (!merge[size_t(i)]) continue;
-    Eigen::Matrix3d R;
-    for (int k = 0; k < 9; ++k) R(k / 3, k % 3) = double(nodes[size_t(i)].R[k]);
-    const int l = nodes[size_t(i)].link, rc = nodes[size_t(i)].right;
-    set_box(nodes[size_t(i)], R, [&](const auto& f) {
-      for (int c : {l, rc}) {
-        const Node& ch = nodes[size_t(c)];
-        Eigen::Matrix3d Rc;
-        for (int k = 0; k < 9; ++k) Rc(k / 3, k % 3) = double(ch.R[k]);
-        // The child's box is {x : |Rc x - m| <= e}; Rc is orthonormal to 1e-7, so its corners
-        // are Rc^-1 (m ± e), enlarged by the frame error.
-        const Eigen::Matrix3d Ri = Rc.inverse();
-        for (int corner = 0; corner < 8; ++corner) {
-          Eigen::Vector3d l3;
-          for (int k = 0; k < 3; ++k)
-            l3[k] = double(ch.m[k]) + ((corner >> k) & 1 ? 1.0 : -1.0) * double(ch.e[k]) * (1 + kFrameError);
-          f(Eigen::Vector3d(Ri * l3));
-        }
-      }
-    });
   }
   // Collapse into Node4s in depth-first order: a node's children are the binary node's children,
   // the inner one with the most faces (the first on a tie) replaced by its children until there are four.
