@@ -257,8 +257,7 @@ struct SurfaceIndex::Impl {
 // Top-down: each node's axes are the principal axes of its faces' corners (of at most 64 faces),
 // its extents are measured on all its corners (exact boxes at every level: loose upper boxes
 // cost far more queries than the O(n log n) build), and it is split at the median centroid along
-// its longest axis. Deterministic: the median is found on (projection, face index) pairs, and the
-// extents are minima and maxima (the same whatever the threads).
+// its longest axis. Deterministic: the median is found on (projection, face index) pairs.
 void SurfaceIndex::Impl::build() {
   const int nf = int(mesh.faces.size());
   std::vector<Node> nodes;  // the binary tree; nodes[0] is the root
@@ -279,12 +278,11 @@ void SurfaceIndex::Impl::build() {
   slack = 1e-12 * scale + std::numeric_limits<double>::min();
   coordinate_bound = scale;
   // Stores the frame R (rounded to float) and the extents in it of the corners of the faces
-  // order[begin, end), widened for rounding. Big ranges (the top of the tree) on all threads.
+  // order[begin, end), widened for rounding.
   const auto set_box = [&](Node& node, const Eigen::Matrix3d& R, int begin, int end) {
     Eigen::Matrix3d Rf;
     for (int i = 0; i < 9; ++i) node.R[i] = float(R(i / 3, i % 3)), Rf(i / 3, i % 3) = double(node.R[i]);
     double lo0 = INFINITY, lo1 = INFINITY, lo2 = INFINITY, hi0 = -INFINITY, hi1 = -INFINITY, hi2 = -INFINITY;
-#pragma omp parallel for schedule(static) reduction(min : lo0, lo1, lo2) reduction(max : hi0, hi1, hi2) if (end - begin > 65536)
     for (int k = begin; k < end; ++k)
       for (int v : mesh.faces[size_t(order[size_t(k)].second)]) {
         const Eigen::Vector3d l = Rf * mesh.vertices[size_t(v)];
