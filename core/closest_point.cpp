@@ -4,8 +4,13 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include <numeric>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 namespace flankcam {
 
@@ -53,46 +58,96 @@ double covering_radius_of(const Eigen::Vector3d& a, const Eigen::Vector3d& b, co
 }
 
 
-// Oriented bounding box of a node: local = R (p - c), |local_k| <= e_k. R's rows are the
-// principal axes of the node's vertices, so on a smooth surface the box is thin along the
-// normal and the lower bound stays tight at any query distance (an axis-aligned box is as thick
-// as the patch is tilted, and the number of boxes it cannot prune grows like √n at one tool
-// radius off the surface).
+// Oriented bounding box of a node of the binary tree that is built first: local = R (p - c),
+// |local_k| <= e_k. R's rows are the principal axes of the node's vertices, so on a smooth surface
+// the box is thin along the normal and the lower bound stays tight at any query distance (an
+// axis-aligned box is as thick as the patch is tilted, and the number of boxes it cannot prune
+// grows like √n at one tool radius off the surface).
 struct Node {
-  float R[9];      // rows: the principal axes, rounded to float (the extents are measured in this frame)
-  float m[3];      // centre of the box in that frame
-  float e[3];      // half extents, rounded up
-  int first = 0;   // leaf: first slot in Impl::tri; inner: index of the left child (right = first + 1)
-  int count = 0;   // leaf: number of faces; 0 for inner nodes
-
-  // Squared distance from p to the box (0 inside), in the box's frame. The float axes are unit and
-  // orthogonal to 1e-7, so this exceeds the true distance by at most a factor 1 + kFrameError.
-  double distance2(double x, double y, double z) const {
-    const double o0 = std::max(0.0, std::abs(double(R[0]) * x + double(R[1]) * y + double(R[2]) * z - double(m[0])) - double(e[0]));
-    const double o1 = std::max(0.0, std::abs(double(R[3]) * x + double(R[4]) * y + double(R[5]) * z - double(m[1])) - double(e[1]));
-    const double o2 = std::max(0.0, std::abs(double(R[6]) * x + double(R[7]) * y + double(R[8]) * z - double(m[2])) - double(e[2]));
-    return o0 * o0 + o1 * o1 + o2 * o2;
-  }
-  // Signed depth of p in the box: the largest |local| - e (negative inside). Orders two children
-  // that both contain p: the one p is deeper in is more likely to hold its footpoint.
-  double depth(double x, double y, double z) const {
-    const double o0 = std::abs(double(R[0]) * x + double(R[1]) * y + double(R[2]) * z - double(m[0])) - double(e[0]);
-    const double o1 = std::abs(double(R[3]) * x + double(R[4]) * y + double(R[5]) * z - double(m[1])) - double(e[1]);
-    const double o2 = std::abs(double(R[6]) * x + double(R[7]) * y + double(R[8]) * z - double(m[2])) - double(e[2]);
-    return std::max({o0, o1, o2});
-  }
+  float R[9];     // rows: the principal axes, rounded to float (the extents are measured in this frame)
+  float m[3];     // centre of the box in that frame
+  float e[3];     // half extents, rounded up
+  int link = 0;   // inner: index of the left child; leaf: ~(first slot * 8 + count)
+  int right = 0;  // inner: index of the right child
+  int faces = 0;  // number of faces below
+  [[nodiscard]] bool leaf() const { return link < 0; }
 };
 constexpr double kFrameError = 1e-6;
 
-// A face in leaf order: corners, unit normal and plane offset (the plane distance bounds the face
-// distance from below and skips most faces of a leaf cheaply).
+// The searched tree: the binary tree collapsed to four children per node, their boxes side by side
+// (lane j is child j) so that one pass of 4-wide float arithmetic bounds all four. The float
+// bounds are made conservative by kFloatError (see Impl::search).
+constexpr int kEmptyLane = std::numeric_limits<int>::min();
+struct alignas(64) Node4 {
+  float R[9][4];
+  float m[3][4];
+  float e[3][4];
+  int link[4];  // >= 0: index of a Node4; kEmptyLane: no child; else leaf: ~(first slot * 8 + count)
+};
+static_assert(sizeof(Node4) == 256, "four cache lines per node");
+constexpr double kFloatError = 1e-6;
+
+// A face in leaf order: a copy of its corners (the same doubles as the mesh's, so the distance
+// is bit-equal to brute force's), its index, and its boundary flags for the footpoint (bit k:
+// edge k is a boundary edge; bit 3 + k: corner k is a boundary vertex).
 struct LeafFace {
-  Eigen::Vector3d a, b, c, n;
-  double offset;
-  int face;
+  Eigen::Vector3d a, b, c;
+  int face = -1;
+  int boundary = 0;
 };
 
 constexpr int kLeafFaces = 4;
+
+// Float lower bounds on the distance from a point to each face of a leaf (lane j: face j): the
+// distance to the face's plane, and in the plane the distance beyond the farthest edge line
+// (u_k: the inward unit normal of edge k in the plane), |p - q|^2 >= plane^2 + beyond^2 for every
+// q of the face. Lets a leaf skip most of its exact point-triangle tests.
+struct alignas(64) LeafBound {
+  float n[3][4], d[4];         // unit normal, n.a
+  float u[3][3][4], ud[3][4];  // edge k: u_k, u_k.(corner k)
+};
+
+// Fills lane j of b for face t. A degenerate face gets zeros (bound 0: always tested exactly).
+void set_lane(LeafBound& b, int j, const LeafFace& t) {
+  const Eigen::Vector3d corner[3] = {t.a, t.b, t.c};
+  const Eigen::Vector3d n = (t.b - t.a).cross(t.c - t.a).normalized();
+  Eigen::Vector3d u[3];
+  for (int k = 0; k < 3; ++k) u[k] = n.cross(corner[(k + 1) % 3] - corner[k]).normalized();
+  if (!n.allFinite() || !u[0].allFinite() || !u[1].allFinite() || !u[2].allFinite()) return;
+  for (int i = 0; i < 3; ++i) b.n[i][j] = float(n[i]);
+  b.d[j] = float(n.dot(t.a));
+  for (int k = 0; k < 3; ++k) {
+    for (int i = 0; i < 3; ++i) b.u[k][i][j] = float(u[k][i]);
+    b.ud[k][j] = float(u[k].dot(corner[k]));
+  }
+}
+
+// Squared lower bounds for the four lanes, each term lowered by `margin` (the float evaluation's
+// error bound for this query) before squaring.
+inline void leaf_bound4(const LeafBound& b, float x, float y, float z, float margin, float* lb) {
+#ifdef __SSE2__
+  const __m128 X = _mm_set1_ps(x), Y = _mm_set1_ps(y), Z = _mm_set1_ps(z), M = _mm_set1_ps(margin), zero = _mm_setzero_ps();
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff));
+  const auto dot = [&](const float (*v)[4], const float* d) {
+    return _mm_sub_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_load_ps(v[0]), X), _mm_mul_ps(_mm_load_ps(v[1]), Y)),
+                                 _mm_mul_ps(_mm_load_ps(v[2]), Z)),
+                      _mm_load_ps(d));
+  };
+  const __m128 plane = _mm_max_ps(_mm_sub_ps(_mm_and_ps(dot(b.n, b.d), abs_mask), M), zero);
+  // beyond edge k: -(u_k.p - u_k.corner_k)
+  const __m128 beyond = _mm_max_ps(
+      _mm_sub_ps(_mm_sub_ps(zero, _mm_min_ps(_mm_min_ps(dot(b.u[0], b.ud[0]), dot(b.u[1], b.ud[1])), dot(b.u[2], b.ud[2]))), M), zero);
+  _mm_store_ps(lb, _mm_add_ps(_mm_mul_ps(plane, plane), _mm_mul_ps(beyond, beyond)));
+#else
+  for (int j = 0; j < 4; ++j) {
+    const float plane = std::max(std::abs(b.n[0][j] * x + b.n[1][j] * y + b.n[2][j] * z - b.d[j]) - margin, 0.0F);
+    float inside = INFINITY;
+    for (int k = 0; k < 3; ++k) inside = std::min(inside, b.u[k][0][j] * x + b.u[k][1][j] * y + b.u[k][2][j] * z - b.ud[k][j]);
+    const float beyond = std::max(-inside - margin, 0.0F);
+    lb[j] = plane * plane + beyond * beyond;
+  }
+#endif
+}
 
 // The order both searches pick by: smaller squared distance, then the lower face index; a NaN
 // distance (a degenerate triangle) counts as infinite. Updates (best2, face) and says whether f won.
@@ -115,6 +170,38 @@ Footpoint no_footpoint() {
   return f;
 }
 
+// Lower bounds on the squared distance from (x, y, z) to the four boxes of w, lowered by `margin`
+// on each axis, and the order keys: the squared distance outside a box, the (negative) depth
+// inside (the deeper p is in a box, the likelier it holds the footpoint).
+inline void bound4(const Node4& w, float x, float y, float z, float margin, float* d2, float* key) {
+#ifdef __SSE2__
+  const __m128 X = _mm_set1_ps(x), Y = _mm_set1_ps(y), Z = _mm_set1_ps(z), M = _mm_set1_ps(margin);
+  const __m128 abs_mask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff)), zero = _mm_setzero_ps();
+  const auto outside = [&](int k) {
+    const __m128 l = _mm_sub_ps(_mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_load_ps(w.R[3 * k]), X), _mm_mul_ps(_mm_load_ps(w.R[3 * k + 1]), Y)),
+                                           _mm_mul_ps(_mm_load_ps(w.R[3 * k + 2]), Z)),
+                                _mm_load_ps(w.m[k]));
+    return _mm_sub_ps(_mm_sub_ps(_mm_and_ps(l, abs_mask), _mm_load_ps(w.e[k])), M);
+  };
+  const __m128 o0 = outside(0), o1 = outside(1), o2 = outside(2);
+  const __m128 c0 = _mm_max_ps(o0, zero), c1 = _mm_max_ps(o1, zero), c2 = _mm_max_ps(o2, zero);
+  const __m128 d = _mm_add_ps(_mm_add_ps(_mm_mul_ps(c0, c0), _mm_mul_ps(c1, c1)), _mm_mul_ps(c2, c2));
+  const __m128 depth = _mm_max_ps(o0, o1);
+  const __m128 out = _mm_cmpgt_ps(d, zero);
+  _mm_store_ps(d2, d);
+  _mm_store_ps(key, _mm_or_ps(_mm_and_ps(out, d), _mm_andnot_ps(out, depth)));
+#else
+  for (int j = 0; j < 4; ++j) {
+    float o[3];
+    for (int k = 0; k < 3; ++k)
+      o[k] = std::abs(w.R[3 * k][j] * x + w.R[3 * k + 1][j] * y + w.R[3 * k + 2][j] * z - w.m[k][j]) - w.e[k][j] - margin;
+    const float c0 = std::max(o[0], 0.0F), c1 = std::max(o[1], 0.0F), c2 = std::max(o[2], 0.0F);
+    d2[j] = c0 * c0 + c1 * c1 + c2 * c2;
+    key[j] = d2[j] > 0 ? d2[j] : std::max(o[0], o[1]);
+  }
+#endif
+}
+
 }  // namespace
 
 struct SurfaceIndex::Impl {
@@ -122,9 +209,12 @@ struct SurfaceIndex::Impl {
   std::vector<Eigen::Vector3d> normals;
   MeshTopology topology;
   double cover = 0;
-  std::vector<Node> nodes;                  // nodes[0] is the root
-  std::vector<LeafFace> tri;                // the faces in leaf order
+  std::vector<Node4> wide;                  // wide[0] is the root
+  std::vector<LeafFace> tri;                // the faces in leaf order, kLeafFaces slots per leaf
+  std::vector<LeafBound> bounds;            // per leaf: bounds[slot / kLeafFaces]
   double slack = 0;                         // absolute rounding allowance of the box bounds
+  double coordinate_bound = 0;              // largest |coordinate| of a vertex
+  BoundingBox box;                          // of the vertices (orders batch queries)
 
   double face_distance2(int f, const Eigen::Vector3d& p) const {
     const auto& F = mesh.faces[f];
@@ -135,38 +225,49 @@ struct SurfaceIndex::Impl {
   void build();
   int search(const Eigen::Vector3d& p) const;
 
-  Footpoint make_footpoint(const Eigen::Vector3d& p, int f) const {
-    const auto& F = mesh.faces[f];
-    const TrianglePoint tp = closest_on_triangle(p, mesh.vertices[F[0]], mesh.vertices[F[1]], mesh.vertices[F[2]]);
+  // The footpoint of p on face f, whose closest point is tp; `boundary` as in LeafFace.
+  Footpoint make_footpoint(const Eigen::Vector3d& p, int f, const TrianglePoint& tp, int boundary) const {
+    const auto& F = mesh.faces[size_t(f)];
     Footpoint fp;
     fp.point = tp.point;
     fp.barycentric = tp.barycentric;
     fp.distance = (p - tp.point).norm();
     fp.face = f;
     Eigen::Vector3d n = Eigen::Vector3d::Zero();
-    for (int k = 0; k < 3; ++k) n += tp.barycentric[k] * normals[F[k]];
+    for (int k = 0; k < 3; ++k) n += tp.barycentric[k] * normals[size_t(F[size_t(k)])];
     fp.normal = n.norm() > 1e-12 ? Eigen::Vector3d(n.normalized()) : face_normal(mesh, f);
     // On the boundary: on a boundary edge (the opposite corner's weight is 0) or at a boundary vertex.
     for (int k = 0; k < 3; ++k) {
       const int opposite = (k + 2) % 3;
-      if (tp.barycentric[opposite] == 0 && topology.boundary_edge[f][k]) fp.on_boundary = true;
-      if (tp.barycentric[k] == 1 && topology.boundary_vertex[F[k]]) fp.on_boundary = true;
+      if (tp.barycentric[opposite] == 0 && (boundary >> k & 1)) fp.on_boundary = true;
+      if (tp.barycentric[k] == 1 && (boundary >> (3 + k) & 1)) fp.on_boundary = true;
     }
     return fp;
+  }
+  int boundary_flags(int f) const {
+    int flags = 0;
+    for (int k = 0; k < 3; ++k) {
+      if (topology.boundary_edge[size_t(f)][size_t(k)]) flags |= 1 << k;
+      if (topology.boundary_vertex[size_t(mesh.faces[size_t(f)][size_t(k)])]) flags |= 8 << k;
+    }
+    return flags;
   }
 };
 
 // Top-down: each node's axes are the principal axes of its faces' corners (of at most 64 faces),
-// split at the median centroid along the axis of largest spread. Nodes of up to kExactFaces faces measure their extents on the corners; bigger ones enclose their children's
-// boxes (8 corners each, bottom-up), which is looser but costs O(1) per node. Deterministic: the
-// median is found on (projection, face index) pairs.
+// its extents are measured on all its corners (exact boxes at every level: loose upper boxes
+// cost far more queries than the O(n log n) build), and it is split at the median centroid along
+// its longest axis. Deterministic: the median is found on (projection, face index) pairs.
 void SurfaceIndex::Impl::build() {
-  constexpr int kExactFaces = 4096;
   const int nf = int(mesh.faces.size());
+  std::vector<Node> nodes;  // the binary tree; nodes[0] is the root
   std::vector<std::pair<double, int>> order(static_cast<size_t>(nf));
   std::vector<Eigen::Vector3d> centroid(static_cast<size_t>(nf));
   double scale = 0;
-  for (const auto& v : mesh.vertices) scale = std::max(scale, v.cwiseAbs().maxCoeff());
+  const long nv = long(mesh.vertices.size());
+#pragma omp parallel for schedule(static) reduction(max : scale) if (nv > 20000)
+  for (long v = 0; v < nv; ++v) scale = std::max(scale, mesh.vertices[size_t(v)].cwiseAbs().maxCoeff());
+#pragma omp parallel for schedule(static) if (nf > 20000)
   for (int f = 0; f < nf; ++f) {
     const auto& F = mesh.faces[size_t(f)];
     centroid[size_t(f)] = (mesh.vertices[size_t(F[0])] + mesh.vertices[size_t(F[1])] + mesh.vertices[size_t(F[2])]) / 3;
@@ -175,40 +276,45 @@ void SurfaceIndex::Impl::build() {
   // A few thousand ulps of the largest coordinate: covers the rounding of the box bounds and of
   // the triangle distances, so a box never prunes a face brute force would pick.
   slack = 1e-12 * scale + std::numeric_limits<double>::min();
-  nodes.reserve(size_t(2 * (nf / kLeafFaces + 1)));
-  tri.reserve(size_t(nf));
-  std::vector<char> merge;  // per node: extents from the children
-
-  // Stores the frame R (rounded to float) and the extents of `points` in it, widened for rounding.
-  const auto set_box = [&](Node& node, const Eigen::Matrix3d& R, const auto& for_each_point) {
+  coordinate_bound = scale;
+  // Stores the frame R (rounded to float) and the extents in it of the corners of the faces
+  // order[begin, end), widened for rounding.
+  const auto set_box = [&](Node& node, const Eigen::Matrix3d& R, int begin, int end) {
     Eigen::Matrix3d Rf;
     for (int i = 0; i < 9; ++i) node.R[i] = float(R(i / 3, i % 3)), Rf(i / 3, i % 3) = double(node.R[i]);
-    Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
-    for_each_point([&](const Eigen::Vector3d& x) {
-      const Eigen::Vector3d l = Rf * x;
-      lo = lo.cwiseMin(l);
-      hi = hi.cwiseMax(l);
-    });
+    double lo0 = INFINITY, lo1 = INFINITY, lo2 = INFINITY, hi0 = -INFINITY, hi1 = -INFINITY, hi2 = -INFINITY;
+    for (int k = begin; k < end; ++k)
+      for (int v : mesh.faces[size_t(order[size_t(k)].second)]) {
+        const Eigen::Vector3d l = Rf * mesh.vertices[size_t(v)];
+        lo0 = std::min(lo0, l[0]), lo1 = std::min(lo1, l[1]), lo2 = std::min(lo2, l[2]);
+        hi0 = std::max(hi0, l[0]), hi1 = std::max(hi1, l[1]), hi2 = std::max(hi2, l[2]);
+      }
+    const Eigen::Vector3d lo(lo0, lo1, lo2), hi(hi0, hi1, hi2);
     for (int k = 0; k < 3; ++k) {
       node.m[k] = float(0.5 * (lo[k] + hi[k]));
       const double half = std::max(hi[k] - double(node.m[k]), double(node.m[k]) - lo[k]);
-      const double wide = half + 4 * slack + 1e-12 * std::abs(double(node.m[k]));
+      // (kFloatError |m|: the centre's share of the search's float error bound)
+      const double wide = half + 4 * slack + (1e-12 + kFloatError) * std::abs(double(node.m[k]));
       node.e[k] = float(wide);
       if (double(node.e[k]) < wide) node.e[k] = std::nextafter(node.e[k], INFINITY);
     }
   };
 
+  // Preorder layout fixed by the face counts alone: a subtree of c faces has 2 ceil(c / kLeafFaces) - 1
+  // nodes (every leaf but the last is full), its left child follows it and its right child follows
+  // the left subtree; a leaf's slots start at its first face's position. So every subtree's nodes
+  // and slots are known before it is built, and subtrees are built in parallel with the same result.
+  const int leaves = (nf + kLeafFaces - 1) / kLeafFaces;
+  nodes.resize(size_t(2 * leaves - 1));
+  tri.resize(size_t(leaves) * kLeafFaces);
+  bounds.resize(size_t(leaves));
   struct Range {
     int node, begin, end;
   };
-  std::vector<Range> todo;
-  nodes.emplace_back();
-  merge.push_back(0);
-  todo.push_back({0, 0, nf});
-  while (!todo.empty()) {
-    const Range r = todo.back();
-    todo.pop_back();
+  // Builds the node of r and returns its children's ranges in `todo`.
+  const auto step = [&](const Range r, std::vector<Range>& todo) {
     const int count = r.end - r.begin;
+    nodes[size_t(r.node)].faces = count;
     const int stride = std::max(1, count / 64);
     Eigen::Vector3d mean = Eigen::Vector3d::Zero();
     int used = 0;
@@ -233,125 +339,186 @@ void SurfaceIndex::Impl::build() {
       Rn.row(1) = Rn.row(2).cross(Rn.row(0)).normalized();
       if (Rn.allFinite()) R = Rn;
     }
-    const auto corners = [&](const auto& f) {
-      for (int k = r.begin; k < r.end; ++k)
-        for (int v : mesh.faces[size_t(order[size_t(k)].second)]) f(mesh.vertices[size_t(v)]);
-    };
-    if (count <= kExactFaces) {
-      set_box(nodes[size_t(r.node)], R, corners);
-    } else {
-      for (int i = 0; i < 9; ++i) nodes[size_t(r.node)].R[i] = float(R(i / 3, i % 3));
-      merge[size_t(r.node)] = 1;
-    }
+    set_box(nodes[size_t(r.node)], R, r.begin, r.end);
     if (count <= kLeafFaces) {
       Node& node = nodes[size_t(r.node)];
-      node.first = int(tri.size());
-      node.count = count;
+      node.link = ~(r.begin * 8 + count);  // r.begin is a multiple of kLeafFaces
       std::sort(order.begin() + r.begin, order.begin() + r.end,
                 [](const auto& x, const auto& y) { return x.second < y.second; });
+      LeafBound bound;
+      std::memset(&bound, 0, sizeof bound);
       for (int k = r.begin; k < r.end; ++k) {
-        const auto& F = mesh.faces[size_t(order[size_t(k)].second)];
+        const int f = order[size_t(k)].second, j = k - r.begin;
+        const auto& F = mesh.faces[size_t(f)];
         LeafFace t;
         t.a = mesh.vertices[size_t(F[0])], t.b = mesh.vertices[size_t(F[1])], t.c = mesh.vertices[size_t(F[2])];
-        const Eigen::Vector3d n = (t.b - t.a).cross(t.c - t.a);
-        const double len = n.norm();
-        t.n = len > 0 && std::isfinite(len) ? Eigen::Vector3d(n / len) : Eigen::Vector3d::Zero();
-        t.offset = t.n.dot(t.a);
-        t.face = order[size_t(k)].second;
-        tri.push_back(t);
+        t.face = f;
+        t.boundary = boundary_flags(f);
+        tri[size_t(k)] = t;
+        set_lane(bound, j, t);
       }
-      continue;
+      bounds[size_t(r.begin / kLeafFaces)] = bound;
+      return;
     }
-    // Split at the median along the box's longest axis (the axis of largest variance on big nodes).
+    // Split at the median along the box's longest axis.
     int axis = 0;
-    if (count <= kExactFaces) Eigen::Vector3f(nodes[size_t(r.node)].e[0], nodes[size_t(r.node)].e[1], nodes[size_t(r.node)].e[2]).maxCoeff(&axis);
+    Eigen::Vector3f(nodes[size_t(r.node)].e[0], nodes[size_t(r.node)].e[1], nodes[size_t(r.node)].e[2]).maxCoeff(&axis);
     const Eigen::RowVector3d dir = R.row(axis);
     for (int k = r.begin; k < r.end; ++k) order[size_t(k)].first = dir.dot(centroid[size_t(order[size_t(k)].second)]);
-    const int mid = r.begin + count / 2;
+    // The left part is a multiple of kLeafFaces, so only the last leaf is not full.
+    const int mid = r.begin + kLeafFaces * ((count + kLeafFaces - 1) / kLeafFaces / 2);
     std::nth_element(order.begin() + r.begin, order.begin() + mid, order.begin() + r.end);
-    const int left = int(nodes.size());
-    nodes[size_t(r.node)].first = left;
-    nodes.emplace_back();
-    nodes.emplace_back();
-    merge.push_back(0);
-    merge.push_back(0);
-    todo.push_back({left + 1, mid, r.end});
+    const int left = r.node + 1, right = r.node + (mid - r.begin) / 2;  // 2 (mid - begin) / 4 - 1 nodes on the left
+    nodes[size_t(r.node)].link = left;
+    nodes[size_t(r.node)].right = right;
+    todo.push_back({right, mid, r.end});
     todo.push_back({left, r.begin, mid});
+  };
+  // The top of the tree serially, then its subtrees of at most `grain` faces on all threads.
+  const int grain = std::max(4096, nf / 64);
+  std::vector<Range> todo{{0, 0, nf}}, deferred;
+  while (!todo.empty()) {
+    const Range r = todo.back();
+    todo.pop_back();
+    if (r.end - r.begin <= grain && nf > 4 * grain) deferred.push_back(r);
+    else step(r, todo);
   }
-  // Children have higher indices than their parent: enclose the children's corners bottom-up.
-  for (int i = int(nodes.size()) - 1; i >= 0; --i) {
-    if (!merge[size_t(i)]) continue;
-    Eigen::Matrix3d R;
-    for (int k = 0; k < 9; ++k) R(k / 3, k % 3) = double(nodes[size_t(i)].R[k]);
-    const int l = nodes[size_t(i)].first;
-    set_box(nodes[size_t(i)], R, [&](const auto& f) {
-      for (int c : {l, l + 1}) {
-        const Node& ch = nodes[size_t(c)];
-        Eigen::Matrix3d Rc;
-        for (int k = 0; k < 9; ++k) Rc(k / 3, k % 3) = double(ch.R[k]);
-        // The child's box is {x : |Rc x - m| <= e}; Rc is orthonormal to 1e-7, so its corners
-        // are Rc^-1 (m ± e), enlarged by the frame error.
-        const Eigen::Matrix3d Ri = Rc.inverse();
-        for (int corner = 0; corner < 8; ++corner) {
-          Eigen::Vector3d l3;
-          for (int k = 0; k < 3; ++k)
-            l3[k] = double(ch.m[k]) + ((corner >> k) & 1 ? 1.0 : -1.0) * double(ch.e[k]) * (1 + kFrameError);
-          f(Eigen::Vector3d(Ri * l3));
-        }
+#pragma omp parallel for schedule(dynamic, 1)
+  for (long i = 0; i < long(deferred.size()); ++i) {
+    std::vector<Range> local{deferred[size_t(i)]};
+    while (!local.empty()) {
+      const Range r = local.back();
+      local.pop_back();
+      step(r, local);
+    }
+  }
+  // Collapse into Node4s in depth-first order: a node's children are the binary node's children,
+  // the inner one with the most faces (the first on a tie) replaced by its children until there are four.
+  wide.reserve(nodes.size() / 3 + 1);
+  const auto collapse = [&](const auto& self, std::vector<int> lanes) -> int {
+    for (;;) {
+      int expand = -1;
+      if (lanes.size() < 4)
+        for (int j = 0; j < int(lanes.size()); ++j)
+          if (!nodes[size_t(lanes[size_t(j)])].leaf() &&
+              (expand < 0 || nodes[size_t(lanes[size_t(j)])].faces > nodes[size_t(lanes[size_t(expand)])].faces))
+            expand = j;
+      if (expand < 0) break;
+      const Node& b = nodes[size_t(lanes[size_t(expand)])];
+      const int l = b.link, rc = b.right;
+      lanes[size_t(expand)] = l;
+      lanes.insert(lanes.begin() + expand + 1, rc);
+    }
+    const int index = int(wide.size());
+    wide.emplace_back();
+    for (int j = 0; j < 4; ++j) {
+      Node4& w = wide[size_t(index)];
+      if (j >= int(lanes.size())) {
+        w.link[j] = kEmptyLane;
+        for (int k = 0; k < 3; ++k) w.m[k][j] = 0, w.e[k][j] = 0;
+        for (int k = 0; k < 9; ++k) w.R[k][j] = 0;
+        continue;
       }
-    });
-  }
+      const Node& b = nodes[size_t(lanes[size_t(j)])];
+      for (int k = 0; k < 9; ++k) w.R[k][j] = b.R[k];
+      for (int k = 0; k < 3; ++k) w.m[k][j] = b.m[k], w.e[k][j] = b.e[k];
+      w.link[j] = b.leaf() ? b.link : 0;
+    }
+    for (int j = 0; j < int(lanes.size()); ++j)
+      if (!nodes[size_t(lanes[size_t(j)])].leaf()) {
+        const Node& b = nodes[size_t(lanes[size_t(j)])];
+        const int child = self(self, std::vector<int>{b.link, b.right});
+        wide[size_t(index)].link[j] = child;
+      }
+    return index;
+  };
+  collapse(collapse, nodes[0].leaf() ? std::vector<int>{0} : std::vector<int>{nodes[0].link, nodes[0].right});
 }
 
-// Ordered depth-first search: the nearer child first, a node is skipped when its box is farther
-// than the best face so far. Among faces at the same distance the lowest index wins, as in
-// closest_brute_force, so the answer is the same face whatever the tree's shape.
+// Ordered depth-first search: the nearer children first, a child is skipped when its box is
+// farther than the best face so far. Among faces at the same distance the lowest index wins, as in
+// closest_brute_force, so the answer is the same face whatever the tree's shape. Returns the slot
+// in `tri` of the closest face, -1 if there is none.
+//
+// The boxes are bounded in float: the local coordinates R p - m are off by at most a few float
+// ulps of |p|_1 + |m| (R's entries are below 1 + 1e-7), so |local| - e is lowered by kFloatError
+// (|p|_1 + |m|) (the |m| part is in e since build) and the squared bound compared with a prune
+// radius raised by kFloatError: a box is never pruned when the double bound would keep it.
 int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
   struct Entry {
-    int node;
-    double d2;
+    int link;
+    float d2;
   };
-  Entry stack[128];
+  Entry stack[256];
   int top = 0;
   double best2 = std::numeric_limits<double>::infinity();
-  int face = -1;
+  int face = -1, slot = -1;
   // A box is pruned only when it is farther than the best face by more than the rounding slack.
   const auto bound = [&](double b2) {
     const double b = std::sqrt(b2) + slack;
-    return b * b * (1 + 1e-12) * (1 + kFrameError);
+    const double r2 = b * b * (1 + 1e-12) * (1 + kFrameError) * (1 + kFloatError);
+    // float(r2) may round down by half an ulp (2^-24 relative): raised by 2^-22.
+    return r2 < 1e38 ? float(r2) * (1.0F + 0x1p-22F) : INFINITY;
   };
-  double prune2 = std::numeric_limits<double>::infinity();
-  const double px = p.x(), py = p.y(), pz = p.z();
-  stack[top++] = {0, 0.0};
+  float prune2 = INFINITY;
+  const float x = float(p.x()), y = float(p.y()), z = float(p.z());
+  const float margin = float(kFloatError * (std::abs(p.x()) + std::abs(p.y()) + std::abs(p.z())));
+  // The leaf bounds subtract n.a and u.corner (|.| <= 2 coordinate_bound) instead of a centre.
+  const float leaf_margin = float(kFloatError * (std::abs(p.x()) + std::abs(p.y()) + std::abs(p.z()) + 2 * coordinate_bound));
+  const Node4* W = wide.data();
+  // Every child that may be visited is fetched while its siblings are bounded: on big meshes the
+  // search waits on memory, not arithmetic.
+  const auto prefetch = [&](int child) {
+    const auto lines = [](const void* p, size_t bytes) {
+      for (size_t b = 0; b < bytes; b += 64) __builtin_prefetch(static_cast<const char*>(p) + b);
+    };
+    if (child >= 0) return lines(W + child, sizeof(Node4));
+    const int first = (~child) >> 3;
+    lines(&bounds[size_t(first / kLeafFaces)], sizeof(LeafBound));
+    lines(&tri[size_t(first)], sizeof(LeafFace) * size_t((~child) & 7));
+  };
+  stack[top++] = {0, 0.0F};
   while (top > 0) {
     const Entry en = stack[--top];
     if (en.d2 > prune2) continue;
-    int n = en.node;
+    int link = en.link;
     for (;;) {
-      const Node& node = nodes[size_t(n)];
-      if (node.count > 0) {
-        for (int k = node.first; k < node.first + node.count; ++k) {
+      if (link < 0) {
+        const int first = (~link) >> 3, end = first + ((~link) & 7);
+        alignas(16) float lb[4];
+        leaf_bound4(bounds[size_t(first / kLeafFaces)], x, y, z, leaf_margin, lb);
+        for (int k = first; k < end; ++k) {
+          if (lb[k - first] * float(1 - 4 * kFloatError) > prune2) continue;
           const LeafFace& T = tri[size_t(k)];
-          const double plane = T.n.dot(p) - T.offset;
-          if (plane * plane > prune2) continue;  // (prune2 already allows for rounding)
           const double d2 = (closest_on_triangle(p, T.a, T.b, T.c).point - p).squaredNorm();
-          if (closer(d2, T.face, best2, face)) prune2 = bound(best2);
+          if (closer(d2, T.face, best2, face)) {
+            slot = k;
+            prune2 = bound(best2);
+          }
         }
         break;
       }
-      const int l = node.first;
-      const double dl = nodes[size_t(l)].distance2(px, py, pz), dr = nodes[size_t(l) + 1].distance2(px, py, pz);
-      const bool left_first = dl == dr && dl == 0
-                                  ? !(nodes[size_t(l) + 1].depth(px, py, pz) < nodes[size_t(l)].depth(px, py, pz))
-                                  : !(dr < dl);
-      const int near = left_first ? l : l + 1, far = left_first ? l + 1 : l;
-      const double dn = left_first ? dl : dr, dfar = left_first ? dr : dl;
-      if (dfar <= prune2) stack[top++] = {far, dfar};
-      if (!(dn <= prune2)) break;
-      n = near;
+      const Node4& w = W[link];
+      alignas(16) float d2[4], key[4];
+      bound4(w, x, y, z, margin, d2, key);
+      // The children to visit, nearest first (insertion sort of at most four).
+      int order[4], n = 0;
+      for (int j = 0; j < 4; ++j) {
+        if (w.link[j] == kEmptyLane || !(d2[j] <= prune2)) continue;
+        int i = n++;
+        for (; i > 0 && key[j] < key[order[i - 1]]; --i) order[i] = order[i - 1];
+        order[i] = j;
+      }
+      if (n == 0) break;
+      for (int i = n - 1; i >= 0; --i) {
+        const int child = w.link[order[i]];
+        prefetch(child);
+        if (i > 0) stack[top++] = {child, d2[order[i]]};
+      }
+      link = w.link[order[0]];
     }
   }
-  return face;
+  return slot;
 }
 
 SurfaceIndex::SurfaceIndex(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
@@ -359,9 +526,16 @@ SurfaceIndex::SurfaceIndex(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
   s.mesh = std::move(mesh);
   s.normals = vertex_normals(s.mesh);
   s.topology = mesh_topology(s.mesh);
-  for (const auto& F : s.mesh.faces)
-    s.cover = std::max(s.cover, covering_radius_of(s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])],
-                                                   s.mesh.vertices[size_t(F[2])]));
+  const long nf = long(s.mesh.faces.size());
+  double cover = 0;
+#pragma omp parallel for schedule(static) reduction(max : cover) if (nf > 20000)
+  for (long f = 0; f < nf; ++f) {
+    const auto& F = s.mesh.faces[size_t(f)];
+    cover = std::max(cover, covering_radius_of(s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])],
+                                               s.mesh.vertices[size_t(F[2])]));
+  }
+  s.cover = cover;
+  s.box = bounding_box(s.mesh.vertices);
   if (!s.mesh.faces.empty()) s.build();
 }
 
@@ -370,16 +544,47 @@ SurfaceIndex::SurfaceIndex(SurfaceIndex&&) noexcept = default;
 SurfaceIndex& SurfaceIndex::operator=(SurfaceIndex&&) noexcept = default;
 
 Footpoint SurfaceIndex::closest(const Eigen::Vector3d& p) const {
-  const int face = p.allFinite() ? impl_->search(p) : -1;
-  if (face < 0) return no_footpoint();
-  return impl_->make_footpoint(p, face);
+  // Beyond 1e30 the float box bounds would overflow: such a query is answered by brute force.
+  if (p.allFinite() && p.cwiseAbs().maxCoeff() > 1e30) return closest_brute_force(p);
+  const int slot = p.allFinite() ? impl_->search(p) : -1;
+  if (slot < 0) return no_footpoint();
+  const LeafFace& T = impl_->tri[size_t(slot)];
+  return impl_->make_footpoint(p, T.face, closest_on_triangle(p, T.a, T.b, T.c), T.boundary);
 }
+
+namespace {
+// Spreads the low 21 bits of x to every third bit (Morton code).
+uint64_t spread3(uint64_t x) {
+  x &= 0x1fffff;
+  x = (x | x << 32) & 0x1f00000000ffffULL;
+  x = (x | x << 16) & 0x1f0000ff0000ffULL;
+  x = (x | x << 8) & 0x100f00f00f00f00fULL;
+  x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+  x = (x | x << 2) & 0x1249249249249249ULL;
+  return x;
+}
+}  // namespace
 
 std::vector<Footpoint> SurfaceIndex::closest(const std::vector<Eigen::Vector3d>& points) const {
   std::vector<Footpoint> out(points.size());
   const long n = long(points.size());
+  // Queries are answered in Morton order of their position in the mesh's bounding box, so that
+  // neighbouring queries (on one thread) walk the same nodes while they are in cache; each answer
+  // is independent of the order, so out[i] is the same footpoint as closest(points[i]).
+  std::vector<std::pair<uint64_t, long>> order(static_cast<size_t>(n));
+  const Eigen::Vector3d lo = impl_->box.min, size = (impl_->box.max - impl_->box.min).cwiseMax(1e-300);
+  for (long i = 0; i < n; ++i) {
+    uint64_t code = 0;
+    if (points[size_t(i)].allFinite())
+      for (int k = 0; k < 3; ++k) {
+        const double f = std::clamp((points[size_t(i)][k] - lo[k]) / size[k], 0.0, 1.0);
+        code |= spread3(uint64_t(f * 2097151.0)) << k;
+      }
+    order[size_t(i)] = {code, i};
+  }
+  if (n > 1024) std::sort(order.begin(), order.end());
 #pragma omp parallel for schedule(static) if (n > 256)
-  for (long i = 0; i < n; ++i) out[i] = closest(points[i]);
+  for (long j = 0; j < n; ++j) out[size_t(order[size_t(j)].second)] = closest(points[size_t(order[size_t(j)].second)]);
   return out;
 }
 
@@ -390,7 +595,10 @@ Footpoint SurfaceIndex::closest_brute_force(const Eigen::Vector3d& p) const {
   for (int f = 0; f < int(impl_->mesh.faces.size()); ++f)
     closer(impl_->face_distance2(f, p), f, best2, face);
   if (face < 0) return no_footpoint();
-  return impl_->make_footpoint(p, face);
+  const Impl& s = *impl_;
+  const auto& F = s.mesh.faces[size_t(face)];
+  const TrianglePoint tp = closest_on_triangle(p, s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])], s.mesh.vertices[size_t(F[2])]);
+  return s.make_footpoint(p, face, tp, s.boundary_flags(face));
 }
 
 const TriMesh& SurfaceIndex::mesh() const { return impl_->mesh; }

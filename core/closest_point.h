@@ -1,8 +1,9 @@
 // Exact closest points on a triangle mesh: a bounding-volume hierarchy of the faces with an
-// oriented box per node (principal axes, so boxes are thin along the surface normal), searched
-// nearer child first and pruned by the squared box distance. The cost per query grows like
-// log n at any distance from the surface; the answer equals brute force, face included (ties
-// go to the lower face index), whatever the thread count.
+// oriented box per node (principal axes, so boxes are thin along the surface normal), four
+// children per node bounded in one 4-wide float pass, leaves of four faces with float lower
+// bounds before the exact double test; searched nearer child first and pruned by conservative
+// bounds. The cost per query grows like log n at any distance from the surface; the answer equals
+// brute force, face included (ties go to the lower face index), whatever the thread count.
 #pragma once
 #include <Eigen/Core>
 #include <array>
@@ -41,7 +42,8 @@ class SurfaceIndex {
   // no footpoint: face -1, distance +inf, NaN point and normal, on_boundary true (so callers that
   // leave out samples beyond Φ's rim leave it out too). Never throws.
   [[nodiscard]] Footpoint closest(const Eigen::Vector3d& p) const;
-  // Both cores; result i belongs to points[i].
+  // Both cores; result i belongs to points[i]. Answered in Morton order of the points (neighbours
+  // share cached nodes): the same footpoints as one closest() per point.
   [[nodiscard]] std::vector<Footpoint> closest(const std::vector<Eigen::Vector3d>& points) const;
   // Brute force over all triangles; the reference the tests compare against (same tie rule).
   [[nodiscard]] Footpoint closest_brute_force(const Eigen::Vector3d& p) const;

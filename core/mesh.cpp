@@ -71,8 +71,10 @@ struct EdgeFaces {
         const int a = m.faces[f][k], b = m.faces[f][(k + 1) % 3];
         uses[size_t(fill[size_t(std::min(a, b))]++)] = {std::max(a, b), f, k};
       }
-    for (size_t v = 0; v + 1 < start.size(); ++v)
-      std::sort(uses.begin() + start[v], uses.begin() + start[v + 1],
+    const long nv = long(start.size()) - 1;
+#pragma omp parallel for schedule(dynamic, 8192) if (nv > 20000)
+    for (long v = 0; v < nv; ++v)
+      std::sort(uses.begin() + start[size_t(v)], uses.begin() + start[size_t(v) + 1],
                 [](const Use& x, const Use& y) { return std::tie(x.other, x.face, x.k) < std::tie(y.other, y.face, y.k); });
   }
   // The uses of edge {a, b}: [first, last), in face order.
@@ -120,34 +122,35 @@ int orient_components(TriMesh& m, const EdgeFaces& edges) {
   return flips;
 }
 
-// Edge-connected components.
+// Edge-connected components, numbered in the order of their lowest face: union-find over the
+// faces sharing each edge (one pass over the edge uses), then labels in face order.
 struct Components {
   std::vector<int> of_face;
   int count = 0;
 };
 Components label_components(const TriMesh& m, const EdgeFaces& edges) {
-  std::vector<int> component(m.faces.size(), -1);
-  int components = 0;
-  std::vector<int> stack;
-  for (int seed = 0; seed < int(m.faces.size()); ++seed) {
-    if (component[seed] >= 0) continue;
-    component[seed] = components;
-    stack.push_back(seed);
-    while (!stack.empty()) {
-      const int f = stack.back();
-      stack.pop_back();
-      for (int k = 0; k < 3; ++k) {
-        const auto [first, last] = edges.of(m.faces[f][k], m.faces[f][(k + 1) % 3]);
-        for (const auto* u = first; u != last; ++u)
-          if (component[u->face] < 0) {
-            component[u->face] = components;
-            stack.push_back(u->face);
-          }
-      }
+  std::vector<int> parent(m.faces.size());
+  for (size_t f = 0; f < parent.size(); ++f) parent[f] = int(f);
+  const auto find = [&](int f) {
+    while (parent[size_t(f)] != f) f = parent[size_t(f)] = parent[size_t(parent[size_t(f)])];
+    return f;
+  };
+  for (size_t v = 0; v + 1 < edges.start.size(); ++v)
+    for (int i = edges.start[v] + 1; i < edges.start[v + 1]; ++i) {
+      const auto &u = edges.uses[size_t(i)], &prev = edges.uses[size_t(i) - 1];
+      if (u.other != prev.other) continue;  // a different edge
+      const int a = find(prev.face), b = find(u.face);
+      if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
     }
-    ++components;
+  Components c;
+  c.of_face.assign(m.faces.size(), -1);
+  std::vector<int> label(m.faces.size(), -1);
+  for (size_t f = 0; f < m.faces.size(); ++f) {
+    const int r = find(int(f));
+    if (label[size_t(r)] < 0) label[size_t(r)] = c.count++;
+    c.of_face[f] = label[size_t(r)];
   }
-  return {std::move(component), components};
+  return c;
 }
 
 }  // namespace
@@ -284,19 +287,29 @@ MeshTopology mesh_topology(const TriMesh& m) {
 }
 
 std::vector<Eigen::Vector3d> vertex_normals(const TriMesh& m) {
-  std::vector<Eigen::Vector3d> n(m.vertices.size(), Eigen::Vector3d::Zero());
-  for (int f = 0; f < int(m.faces.size()); ++f) {
-    const Eigen::Vector3d fn = face_normal(m, f);
+  // Each face's three weighted normals in parallel, then summed per vertex in face order (the
+  // order of a serial loop: the same bits at any thread count).
+  const long nf = long(m.faces.size());
+  std::vector<std::array<Eigen::Vector3d, 3>> part(m.faces.size());
+#pragma omp parallel for schedule(static) if (nf > 20000)
+  for (long f = 0; f < nf; ++f) {
+    const Eigen::Vector3d fn = face_normal(m, int(f));
+    const auto& F = m.faces[size_t(f)];
     for (int k = 0; k < 3; ++k) {
-      const Eigen::Vector3d e1 = m.vertices[m.faces[f][(k + 1) % 3]] - m.vertices[m.faces[f][k]];
-      const Eigen::Vector3d e2 = m.vertices[m.faces[f][(k + 2) % 3]] - m.vertices[m.faces[f][k]];
+      const Eigen::Vector3d e1 = m.vertices[size_t(F[size_t((k + 1) % 3)])] - m.vertices[size_t(F[size_t(k)])];
+      const Eigen::Vector3d e2 = m.vertices[size_t(F[size_t((k + 2) % 3)])] - m.vertices[size_t(F[size_t(k)])];
       const double angle = std::atan2(e1.cross(e2).norm(), e1.dot(e2));
-      n[m.faces[f][k]] += angle * fn;
+      part[size_t(f)][size_t(k)] = angle * fn;
     }
   }
-  for (auto& v : n) {
-    const double len = v.norm();
-    if (len > 0) v /= len;
+  std::vector<Eigen::Vector3d> n(m.vertices.size(), Eigen::Vector3d::Zero());
+  for (size_t f = 0; f < part.size(); ++f)
+    for (int k = 0; k < 3; ++k) n[size_t(m.faces[f][size_t(k)])] += part[f][size_t(k)];
+  const long nv = long(n.size());
+#pragma omp parallel for schedule(static) if (nv > 20000)
+  for (long v = 0; v < nv; ++v) {
+    const double len = n[size_t(v)].norm();
+    if (len > 0) n[size_t(v)] /= len;
   }
   return n;
 }

@@ -58,8 +58,14 @@ double wrap180(double deg) {
 
 }  // namespace
 
-std::vector<TwoRotations> solve_two_rotations(const Eigen::Vector3d& w1, const Eigen::Vector3d& w2, const Eigen::Vector3d& v,
-                                              const Eigen::Vector3d& w) {
+namespace {
+struct TwoRotationsPair {
+  std::array<TwoRotations, 2> items{};
+  int count = 0;
+};
+// solve_two_rotations without allocating (the path solver calls it for every pose).
+TwoRotationsPair two_rotations(const Eigen::Vector3d& w1, const Eigen::Vector3d& w2, const Eigen::Vector3d& v,
+                               const Eigen::Vector3d& w) {
   // u = R(ω2, β) v = R(ω1, -α) w keeps its component along ω2 (from v) and along ω1 (from w):
   // u = c1 ω1 + c2 ω2 + c3 (ω1 x ω2), |u| = |v|.
   const double g = w1.dot(w2);
@@ -70,19 +76,25 @@ std::vector<TwoRotations> solve_two_rotations(const Eigen::Vector3d& w1, const E
   const Eigen::Vector3d base = c1 * w1 + c2 * w2;
   const double rest = v.squaredNorm() - base.squaredNorm();
   const double nn = n.squaredNorm();
-  std::vector<TwoRotations> out;
+  TwoRotationsPair out;
   const double tiny = 1e-12;
   if (rest < -tiny) return out;  // the tilt needed is beyond what the two axes can reach
   const double c3 = std::sqrt(std::max(0.0, rest) / nn);
   for (double sign : {1.0, -1.0}) {
     if (sign < 0 && c3 * std::sqrt(nn) < 1e-12) break;  // a double root: one solution
     const Eigen::Vector3d u = base + sign * c3 * n;
-    TwoRotations s;
+    TwoRotations& s = out.items[size_t(out.count++)];
     s.beta = angle_about(w2, v, u, s.beta_free);
     s.alpha = angle_about(w1, u, w, s.alpha_free);
-    out.push_back(s);
   }
   return out;
+}
+}  // namespace
+
+std::vector<TwoRotations> solve_two_rotations(const Eigen::Vector3d& w1, const Eigen::Vector3d& w2, const Eigen::Vector3d& v,
+                                              const Eigen::Vector3d& w) {
+  const TwoRotationsPair p = two_rotations(w1, w2, v, w);
+  return {p.items.begin(), p.items.begin() + p.count};
 }
 
 namespace {
@@ -103,12 +115,20 @@ OrientationProblem orientation_problem(const Machine& m, const Eigen::Vector3d& 
 }
 }  // namespace
 
-std::vector<RotarySolution> rotary_solutions(const Machine& m, const Eigen::Vector3d& axis_part) {
+RotarySolutionPair rotary_solution_pair(const Machine& m, const Eigen::Vector3d& axis_part) {
   const OrientationProblem p = orientation_problem(m, axis_part);
-  std::vector<RotarySolution> out;
-  for (const auto& s : solve_two_rotations(p.w1, p.w2, p.v, p.w))
-    out.push_back({{wrap180(p.alpha_sign * s.alpha / kDeg), wrap180(s.beta / kDeg)}, {s.alpha_free, s.beta_free}});
+  const TwoRotationsPair t = two_rotations(p.w1, p.w2, p.v, p.w);
+  RotarySolutionPair out;
+  for (int i = 0; i < t.count; ++i) {
+    const TwoRotations& s = t.items[size_t(i)];
+    out.items[size_t(out.count++)] = {{wrap180(p.alpha_sign * s.alpha / kDeg), wrap180(s.beta / kDeg)}, {s.alpha_free, s.beta_free}};
+  }
   return out;
+}
+
+std::vector<RotarySolution> rotary_solutions(const Machine& m, const Eigen::Vector3d& axis_part) {
+  const RotarySolutionPair p = rotary_solution_pair(m, axis_part);
+  return {p.begin(), p.end()};
 }
 
 double singularity_angle_deg(const Machine& m, const Eigen::Vector3d& axis_part) {

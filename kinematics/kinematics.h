@@ -31,6 +31,14 @@ struct RotarySolution {
   std::array<bool, 2> free{false, false};
 };
 [[nodiscard]] std::vector<RotarySolution> rotary_solutions(const Machine& m, const Eigen::Vector3d& axis_part);
+// The same solutions without a heap allocation (the path solver's per-pose loop).
+struct RotarySolutionPair {
+  std::array<RotarySolution, 2> items{};
+  int count = 0;
+  [[nodiscard]] const RotarySolution* begin() const { return items.data(); }
+  [[nodiscard]] const RotarySolution* end() const { return items.data() + count; }
+};
+[[nodiscard]] RotarySolutionPair rotary_solution_pair(const Machine& m, const Eigen::Vector3d& axis_part);
 
 // Angle (deg) between the pose and the nearest singular orientation, where one rotary angle is free
 // (e.g. the tool axis along the C axis of an A/C table). Near it the free angle swings fast.

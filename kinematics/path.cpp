@@ -3,6 +3,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <fmt/format.h>
 #include <limits>
 #include <optional>
@@ -29,6 +30,7 @@ constexpr double kDeg = M_PI / 180;
 struct Candidate {
   std::array<double, 2> deg;
   int linear_ok = -1;  // 1/0: the linear joints are within limits (unwinding does not change them); -1: a free angle, check later
+  Eigen::Vector3d linear = Eigen::Vector3d::Zero();  // at `deg` when linear_ok >= 0
   std::string why;     // when linear_ok == 0
 };
 
@@ -95,12 +97,14 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   std::vector<char> singular(static_cast<size_t>(n), 0);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
-    for (const RotarySolution& s : rotary_solutions(m, poses[i].axis)) {
-      Candidate c{s.deg, -1, {}};
+    for (const RotarySolution& s : rotary_solution_pair(m, poses[i].axis)) {
+      Candidate c{s.deg, -1, Eigen::Vector3d::Zero(), {}};
       for (int k = 0; k < 2; ++k)
         if (s.free[k]) c.deg[k] = NAN, singular[i] = 1;
-      if (!s.free[0] && !s.free[1])
-        c.linear_ok = linear_ok(m, linear_joints(m, poses[i], s.deg, o.tool_length_mm), &c.why) ? 1 : 0;
+      if (!s.free[0] && !s.free[1]) {
+        c.linear = linear_joints(m, poses[i], s.deg, o.tool_length_mm);
+        c.linear_ok = linear_ok(m, c.linear, &c.why) ? 1 : 0;
+      }
       cand[i].push_back(std::move(c));
     }
     if (near_singular(m, poses[i].axis, o.singular_deg)) singular[i] = 1;
@@ -214,7 +218,13 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     }
   }
 #pragma omp parallel for schedule(static)
-  for (int i = 0; i < n; ++i) q[i].linear = linear_joints(m, poses[i], q[i].rotary, o.tool_length_mm);
+  for (int i = 0; i < n; ++i) {
+    // The candidate's linear joints when the chosen angles are its own, bit for bit (no turn added).
+    const Candidate& c = cand[i][size_t(pick[i])];
+    q[i].linear = c.linear_ok >= 0 && std::memcmp(c.deg.data(), q[i].rotary.data(), sizeof c.deg) == 0
+                      ? c.linear
+                      : linear_joints(m, poses[i], q[i].rotary, o.tool_length_mm);
+  }
   for (int i = 0; i < n; ++i) {
     if (i > 0 && cand[i].size() > 1 && cand[i - 1].size() > 1 && !singular[i] &&
         !singular[i - 1] && pick[i] != pick[i - 1])
@@ -234,7 +244,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   const auto nearest = [&](const ToolPose& p, const Joints& near) -> std::optional<Joints> {
     std::optional<Joints> best;
     double best_d = kInf;
-    for (const RotarySolution& s : rotary_solutions(m, p.axis)) {
+    for (const RotarySolution& s : rotary_solution_pair(m, p.axis)) {
       Joints j;
       double d = 0;
       bool ok = true;
@@ -293,27 +303,36 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
 #pragma omp parallel for schedule(dynamic, 256)
   for (int i = 1; i < n; ++i)
     split(i - 1, {t[i - 1], poses[i - 1], q[i - 1]}, {t[i], poses[i], q[i]}, 0, inserted[i], unresolved[i]);
-  size_t total = size_t(n);
-  for (const auto& v : inserted) total += v.size();
-  out.poses.reserve(total), out.t.reserve(total), out.joints.reserve(total), out.input_index.reserve(total);
+  // Output position of each input pose (its inserted poses go just before it), then filled on all threads.
+  std::vector<size_t> at(static_cast<size_t>(n));
+  size_t total = 0;
   for (int i = 0; i < n; ++i) {
-    out.unresolved_blocks += unresolved[i];
-    if (i > 0) {
-      for (const Node& nd : inserted[i]) {
-        out.poses.push_back(nd.pose);
-        out.t.push_back(nd.t);
-        out.joints.push_back(nd.q);
-        out.input_index.push_back(-1);
-        if (near_singular(m, nd.pose.axis, o.singular_deg)) out.singular.push_back(int(out.poses.size()) - 1);
-        ++out.inserted;
-      }
-    }
-    out.poses.push_back(poses[i]);
-    out.t.push_back(t[i]);
-    out.joints.push_back(q[i]);
-    out.input_index.push_back(i);
-    if (singular[i]) out.singular.push_back(int(out.poses.size()) - 1);
+    total += inserted[size_t(i)].size();
+    at[size_t(i)] = total++;
+    out.unresolved_blocks += unresolved[size_t(i)];
+    out.inserted += int(inserted[size_t(i)].size());
   }
+  out.poses.resize(total), out.t.resize(total), out.joints.resize(total), out.input_index.resize(total);
+  std::vector<char> singular_out(total, 0);
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    size_t j = at[size_t(i)] - inserted[size_t(i)].size();
+    for (const Node& nd : inserted[size_t(i)]) {
+      out.poses[j] = nd.pose;
+      out.t[j] = nd.t;
+      out.joints[j] = nd.q;
+      out.input_index[j] = -1;
+      singular_out[j] = near_singular(m, nd.pose.axis, o.singular_deg);
+      ++j;
+    }
+    out.poses[j] = poses[size_t(i)];
+    out.t[j] = t[size_t(i)];
+    out.joints[j] = q[size_t(i)];
+    out.input_index[j] = i;
+    singular_out[j] = singular[size_t(i)];
+  }
+  for (size_t j = 0; j < total; ++j)
+    if (singular_out[j]) out.singular.push_back(int(j));
   return out;
 }
 

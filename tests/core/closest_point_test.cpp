@@ -1,6 +1,7 @@
 #include "core/closest_point.h"
 
 #include <doctest/doctest.h>
+#include <omp.h>
 
 #include <cmath>
 #include <limits>
@@ -186,4 +187,54 @@ TEST_CASE("a query that is not finite has no footpoint and does not crash (issue
   CHECK(batch[0].face >= 0);
   CHECK(batch[1].face == -1);
   CHECK(batch[2].face == index.closest_brute_force({10, 20, -4}).face);
+}
+
+TEST_CASE("closest points equal brute force far from the origin, at tiny scale and on one or two faces") {
+  // The search bounds boxes and faces in float with an error allowance relative to the coordinates:
+  // a surface 1e5 mm from the origin, one a micrometre across, and meshes smaller than one leaf.
+  const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), 20, 60, 1);
+  for (const double scale : {1.0, 1e-6}) {
+    for (const Eigen::Vector3d& shift : {Eigen::Vector3d(1e5, -2e5, 3e4), Eigen::Vector3d(0, 0, 0)}) {
+      CAPTURE(scale);
+      CAPTURE(shift.transpose());
+      TriMesh m = g.mesh;
+      for (auto& v : m.vertices) v = v * scale + shift;
+      const SurfaceIndex index(m);
+      const double diag = bounding_box(m.vertices).diagonal();
+      for (double offset : {0.0, 1e-7, 0.01, 0.05}) check_matches_brute_force(index, offset_points(m, offset * diag, 120, 5));
+      check_matches_brute_force(index, random_points(m, 0.2 * diag, 200, 6));
+    }
+  }
+  for (int faces : {1, 2, 5}) {
+    CAPTURE(faces);
+    const TriMesh m = random_soup(faces, 9);
+    const SurfaceIndex index(m);
+    check_matches_brute_force(index, random_points(m, 20, 300, 10));
+    check_matches_brute_force(index, offset_points(m, 0.0, 50, 11));
+  }
+}
+
+TEST_CASE("the index of a 40k-face mesh is the same on 1 and 2 threads: normals, topology, footpoints") {
+  // Big enough for every parallel part of the build (normals, edge sorting, subtrees of the tree).
+  const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), 60, 350, 1);
+  const TriMesh mesh = transformed(g.mesh, unit_diagonal_frame(g.mesh));
+  REQUIRE(mesh.faces.size() > 40000);
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const SurfaceIndex one(mesh);
+  omp_set_num_threads(2);
+  const SurfaceIndex two(mesh);
+  omp_set_num_threads(threads);
+  CHECK(one.normals() == two.normals());
+  CHECK(one.normals() == vertex_normals(mesh));
+  CHECK(one.topology().boundary_edge == two.topology().boundary_edge);
+  CHECK(one.topology().component == two.topology().component);
+  CHECK(one.covering_radius() == two.covering_radius());
+  const auto queries = offset_points(mesh, 0.05, 2000, 31);
+  const auto a = one.closest(queries), b = two.closest(queries);
+  int differ = 0;
+  for (size_t i = 0; i < queries.size(); ++i)
+    if (a[i].face != b[i].face || a[i].point != b[i].point || a[i].normal != b[i].normal) ++differ;
+  CHECK(differ == 0);
+  check_matches_brute_force(one, std::vector<Eigen::Vector3d>(queries.begin(), queries.begin() + 100));
 }

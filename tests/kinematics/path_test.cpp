@@ -3,6 +3,7 @@
 #include <doctest/doctest.h>
 
 #include <Eigen/Geometry>
+#include <omp.h>
 
 #include "core/errors.h"
 
@@ -223,4 +224,36 @@ TEST_CASE("solve_path breaks a tie between mirror branches the same way whatever
     // The A table's range is [-120, 30]: the branch nearer its middle tilts negative.
     for (const Joints& j : p.joints) CHECK(j.rotary[0] < 0);
   }
+}
+
+TEST_CASE("solve_path gives the same joints, inserted poses and singular poses on 1 and 2 threads") {
+  const Machine m = shipped("xyzac-trt");
+  // Coarse poses (the linearisation inserts) passing near the singular A = 0.
+  const IntendedMotion motion = [](double t) {
+    return ToolPose{Eigen::Vector3d(-100 + 200 * t, 20 * std::sin(3 * t), 10), tilted(0.2 + 20 * t, 400 * t)};
+  };
+  std::vector<ToolPose> poses;
+  std::vector<double> ts;
+  for (int i = 0; i < 150; ++i) ts.push_back(i / 149.0), poses.push_back(motion(ts.back()));
+  PathOptions o;
+  o.tool_length_mm = 80;
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const JointPath a = solve_path(m, poses, ts, o, motion);
+  omp_set_num_threads(2);
+  const JointPath b = solve_path(m, poses, ts, o, motion);
+  omp_set_num_threads(threads);
+  REQUIRE(a.reachable);
+  CHECK(a.inserted > 0);
+  CHECK(!a.singular.empty());
+  REQUIRE(a.joints.size() == b.joints.size());
+  int differ = 0;
+  for (size_t i = 0; i < a.joints.size(); ++i)
+    if (a.joints[i].linear != b.joints[i].linear || a.joints[i].rotary != b.joints[i].rotary || a.t[i] != b.t[i] ||
+        a.input_index[i] != b.input_index[i] || a.poses[i].tip != b.poses[i].tip)
+      ++differ;
+  CHECK(differ == 0);
+  CHECK(a.singular == b.singular);
+  CHECK(a.inserted == b.inserted);
+  check_reproduces(m, a, 80);
 }
