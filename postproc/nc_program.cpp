@@ -124,15 +124,6 @@ bool axial(const ToolPose& p, const ToolPose& q) {
   return d.norm() > 1e-9 && p.axis.cross(q.axis).norm() < 1e-9 && p.axis.cross(d).norm() <= 1e-6 * d.norm();
 }
 
-// Off the surface: the direction from the part's point nearest the middle of the cutter to the axis,
-// across the axis (the flank's normal at the contact line). The axis when the part lies on it.
-Eigen::Vector3d off_surface(const SurfaceIndex& part, const ToolPose& p, double cutter_length) {
-  const Eigen::Vector3d mid = p.tip + 0.5 * cutter_length * p.axis;
-  Eigen::Vector3d v = mid - part.closest(mid).point;
-  v -= v.dot(p.axis) * p.axis;
-  return v.norm() > 1e-6 ? Eigen::Vector3d(v.normalized()) : p.axis;
-}
-
 // The CL-data with its links planned against the part: its own approach (rapids before the first
 // feed move and axial lead-ins) and leave (axial lead-outs and trailing rapids) replaced by a rapid to
 // a point `lead` off the first pose along the surface normal, a feed in along the normal, the cut, and
@@ -153,10 +144,10 @@ ClProgram plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAs
   const ClMove &p0 = cl.moves[first], &p1 = cl.moves[last];
   ClProgram out = cl;
   out.moves.clear();
-  out.moves.push_back({{p0.pose.tip + lead * off_surface(part, p0.pose, a.cutter_length()), p0.pose.axis}, true, 0});
+  out.moves.push_back({{p0.pose.tip + lead * lead_direction(part, p0.pose, a.cutter_length()), p0.pose.axis}, true, 0});
   for (size_t k = first; k <= last; ++k) out.moves.push_back(cl.moves[k]);
   out.moves.back().rapid = false;
-  out.moves.push_back({{p1.pose.tip + lead * off_surface(part, p1.pose, a.cutter_length()), p1.pose.axis}, false,
+  out.moves.push_back({{p1.pose.tip + lead * lead_direction(part, p1.pose, a.cutter_length()), p1.pose.axis}, false,
                        p1.feed_mm_min > 0 ? p1.feed_mm_min : p0.feed_mm_min});
   for (ClMove& mv : out.moves)
     if (!mv.rapid && !(mv.feed_mm_min > 0)) mv.feed_mm_min = p0.feed_mm_min;
