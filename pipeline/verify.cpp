@@ -103,6 +103,18 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
       throw InputError("--cl " + c + ": " + program + " is not one of the programs to verify");
     given_cl[program].push_back(c.substr(eq + 1));
   }
+  // post.setup: auto: the rotation the run chose, from the first program's header (every program of a
+  // run says its work frame).
+  if (job.post.setup_auto && !request.programs.empty() && !is_cl_data_file(request.programs.front())) {
+    static const std::regex frame(R"(work frame = part rotated X (\S+) Y (\S+) Z (\S+) deg)");
+    const std::string text = read_text(request.programs.front());
+    std::smatch mt;
+    if (!std::regex_search(text, mt, frame))
+      throw InputError(job.file.string() + ": post.setup: auto: " + request.programs.front() +
+                       " does not say its work frame; give the rotation as post.setup.rotate");
+    for (size_t k = 0; k < 3; ++k)
+      if (const auto v = parse_number(mt[k + 1].str())) job.post.setup_rotate_deg[k] = *v;
+  }
   // The part and the design surface on the machine (work frame), as the run checks its programs.
   const LoadedMesh surface = load_job_surface(job, progress);
   SurfaceIndex design(to_work(job.post, surface.mesh));
