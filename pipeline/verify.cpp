@@ -70,7 +70,9 @@ std::vector<Eigen::Vector2d> read_meridian(const std::string& path) {
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#' || line.rfind("z_mm", 0) == 0) continue;
     const size_t comma = line.find(',');
-    const auto z = parse_number(line.substr(0, comma)), r = comma == std::string::npos ? std::nullopt : parse_number(line.substr(comma + 1));
+    const std::optional<double> z = parse_number(line.substr(0, comma));
+    std::optional<double> r;
+    if (comma != std::string::npos) r = parse_number(line.substr(comma + 1));
     if (!z || !r) throw InputError(fmt::format("{}:{}: expected 'z_mm,r_mm'", path, n));
     out.emplace_back(*z, *r);
   }
