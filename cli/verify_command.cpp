@@ -26,10 +26,14 @@ int run_verify(const VerifyArgs& args) {
     for (const pipeline::VerifiedProgram& r : run.programs) {
       const VerifyReport& v = r.report;
       if (v.clean())
-        fmt::print("{}: clean, {} motion blocks, min rapid clearance {:.3f} mm, {:.1f}% of the design surface within {} mm\n",
-                   r.file, v.blocks.size(), r.min_rapid_all_mm(), 100 * v.design.coverage(), run.options.gouge_tolerance_mm);
+        fmt::print("{}: clean, {} motion blocks, min rapid clearance {:.3f} mm, {:.1f}% of the design surface within {} mm{}\n",
+                   r.file, v.blocks.size(), r.min_rapid_all_mm(), 100 * v.design.coverage(), run.options.gouge_tolerance_mm,
+                   v.cl_compared ? fmt::format(", {} cutting blocks on the CL-data within {} mm", v.cl_blocks,
+                                               run.options.cl_tolerance_mm)
+                                 : "");
       else
         fmt::print("{}\n", v.first_problem(r.file));
+      if (!r.cl_note.empty()) fmt::print("{}: {}\n", r.file, r.cl_note);
     }
   if (const int bad = run.failing(); bad > 0) {
     fmt::print(stderr, "flankcam verify: {} of {} program(s) collide or gouge (verify.json)\n", bad, run.programs.size());
@@ -48,6 +52,8 @@ Run add_verify_command(CLI::App& app) {
       ->required();
   cmd->add_option("--tool", args->request.tools,
                   "T=FILE: tool T's meridian CSV (z_mm,r_mm); default NAME-tool.csv beside the program");
+  cmd->add_option("--cl", args->request.cl,
+                  "PROGRAM=FILE: the APT CL-data PROGRAM was posted from; default NAME.apt beside the program");
   cmd->add_flag("--quiet", args->quiet, "no summary on stdout");
   return [args] { return run_verify(*args); };
 }

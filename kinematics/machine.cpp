@@ -68,7 +68,8 @@ Machine load_machine(const std::string& path) {
   const Fields f(path);
   const YAML::Node root = f.load();
   if (!root.IsMap()) throw MachineError(path + ": expected a mapping (name:, linear:, rotary:, ...)");
-  f.only_keys(root, "", {"name", "description", "linear", "rotary", "spindle", "gauge_length", "controller"});
+  f.only_keys(root, "", {"name", "description", "linear", "rotary", "spindle", "gauge_length", "controller",
+                          "tool_change"});
   using R = MachineRanges;
   Machine m;
   m.file = path;
@@ -145,6 +146,21 @@ Machine load_machine(const std::string& path) {
     }
     if (c["inverse_time"]) m.controller.inverse_time = f.boolean(c["inverse_time"], "controller.inverse_time");
     if (c["linuxcnc_trt"]) m.controller.linuxcnc_trt = f.boolean(c["linuxcnc_trt"], "controller.linuxcnc_trt");
+  }
+  if (const YAML::Node tc = root["tool_change"]) {
+    // Joint values by axis name; rotaries after the rotary axes are known (and ordered).
+    f.only_keys(tc, "tool_change", {"X", "Y", "Z", m.rotary[0].name, m.rotary[1].name});
+    m.tool_change.line = tc.Mark().line + 1;
+    const char* lnames[3] = {"X", "Y", "Z"};
+    for (size_t k = 0; k < 5; ++k) {
+      const std::string name = k < 3 ? lnames[k] : m.rotary[k - 3].name;
+      if (const YAML::Node v = tc[name]) {
+        const bool lin = k < 3;
+        const double lo = lin ? m.linear[k].min_mm : m.rotary[k - 3].continuous ? -R::rotary_deg : m.rotary[k - 3].min_deg;
+        const double hi = lin ? m.linear[k].max_mm : m.rotary[k - 3].continuous ? R::rotary_deg : m.rotary[k - 3].max_deg;
+        m.tool_change.joints[k] = f.number_in(v, "tool_change." + name, lo, hi, lin ? "mm" : "deg");
+      }
+    }
   }
   validate(m);
   return m;

@@ -4,6 +4,7 @@
 #pragma once
 #include <Eigen/Core>
 #include <array>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,14 @@ struct Controller {
   bool linuxcnc_trt = false;    // LinuxCNC with trt kinematics active: programs give tip + angles
 };
 
+// Where the tool-change macro takes the machine, in machine joints (mm, deg): first Z, then X and Y,
+// then the rotary axes; an axis not given stays where it is. Default (nothing given): Z to the top of
+// its travel, everything else unchanged.
+struct ToolChangePosition {
+  std::array<std::optional<double>, 5> joints;  // X, Y, Z, rotary[0], rotary[1]
+  int line = 0;                                 // its line in the machine file (0: the default)
+};
+
 struct Machine {
   std::string name, description;
   std::string file;  // where it came from (for messages)
@@ -50,6 +59,7 @@ struct Machine {
   Eigen::Vector3d spindle_direction = Eigen::Vector3d::UnitZ();  // tool axis (tip -> spindle) at zero angles
   double gauge_length_mm = 0;  // head's pivot point to the spindle nose, along the spindle
   Controller controller;
+  ToolChangePosition tool_change;
 
   [[nodiscard]] std::string kind() const;  // "table-table", "head-table" or "head-head"
   [[nodiscard]] int tables() const;

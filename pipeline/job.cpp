@@ -91,10 +91,18 @@ void read_post(const Reader& r, const YAML::Node& p, PostJob& post) {
   r.only_keys(p, "post", {"dialects", "apt", "cl", "tool", "line_numbers", "tolerance", "angle_tolerance", "tool_length",
                           "safe_height", "setup"});
   if (const YAML::Node s = p["setup"]) {
+    if (s.IsScalar() && s.Scalar() == "auto") {
+      post.setup_auto = true;
+    } else {
+    if (!s.IsMap()) r.fail(s, "post.setup", "expected auto or {rotate: [a, b, c], translate: [x, y, z]}");
     r.only_keys(s, "post.setup", {"rotate", "translate"});
     const auto vec = [&](const char* key, std::array<double, 3>& v) {
       const YAML::Node n = s[key];
       if (!n) return;
+      if (std::string(key) == "rotate" && n.IsScalar() && n.Scalar() == "auto") {
+        post.setup_auto = true;
+        return;
+      }
       if (!n.IsSequence() || n.size() != 3) r.fail(n, std::string("post.setup.") + key, "expected 3 numbers");
       const double bound = std::string(key) == "rotate" ? 360 : max_coordinate_mm;
       for (size_t k = 0; k < 3; ++k)
@@ -102,6 +110,7 @@ void read_post(const Reader& r, const YAML::Node& p, PostJob& post) {
     };
     vec("rotate", post.setup_rotate_deg);
     vec("translate", post.setup_translate_mm);
+    }
   }
   if (const YAML::Node d = p["dialects"]) {
     if (!d.IsSequence() || d.size() == 0) r.fail(d, "post.dialects", "expected a list such as [linuxcnc, iso]");

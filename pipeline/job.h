@@ -41,6 +41,9 @@ struct PostJob {
   // Setup: how the part sits on the machine. Programs are in the work frame x_work = R x_part + t,
   // R = Rz(c) Ry(b) Rx(a) for setup.rotate [a, b, c] degrees; t = setup.translate (mm).
   std::array<double, 3> setup_rotate_deg{0, 0, 0}, setup_translate_mm{0, 0, 0};
+  // `setup: auto` (or `rotate: auto`): `run` picks the rotation (pipeline/run.h choose_setup) that keeps
+  // every patch's motion away from the machine's singular orientations; setup_rotate_deg is then set.
+  bool setup_auto = false;
 };
 
 // `patches: auto`: the patches are detected (core/detect.h), optional `cover: {coverage, max_patches}`.

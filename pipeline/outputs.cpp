@@ -195,6 +195,16 @@ std::vector<std::vector<std::string>> write_run(const RunResult& run, OutputDir&
   report["machine"] = {{"name", machine.name}, {"kind", machine.kind()}, {"file", machine.file},
                        {"dialect", machine.controller.dialect}, {"tcp", machine.controller.tcp}};
   report["surface"] = surface_report(job, fitted);
+  if (run.setup) {  // post.setup: auto
+    const auto cand = [](const SetupCandidate& c) {
+      return nlohmann::ordered_json{{"rotate_deg", c.rotate_deg}, {"reachable", c.reachable},
+                                    {"singular_stretches", c.singular_stretches},
+                                    {"min_singular_angle_deg", std::round(c.min_singular_deg * 1e3) / 1e3},
+                                    {"max_rotary_deg_per_axis_deg", std::round(c.max_rotary_per_deg * 1e3) / 1e3}};
+    };
+    report["setup"] = {{"auto", true}, {"candidates", run.setup->candidates}, {"chosen", cand(run.setup->chosen)},
+                       {"unrotated", cand(run.setup->unrotated)}, {"reason", run.setup->reason}};
+  }
   if (fitted.cover) {
     report["cover"] = cover_report(job, fitted);
     write_text(out, detected_job_name, detected_job_yaml(job, fitted));

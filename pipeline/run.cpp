@@ -4,6 +4,8 @@
 #include <omp.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <optional>
 
 #include "core/errors.h"
 #include "pipeline/output_dir.h"
@@ -119,6 +121,83 @@ double tool_length(const Job& job, const FittedPatch& p) {
   return job.holder.length + job.holder.cylinder_length + job.holder.shank_length + p.assembly.cutter_length();
 }
 
+namespace {
+SetupCandidate evaluate_setup(const Job& job, const Machine& m, const std::vector<const ClProgram*>& cl,
+                              const std::vector<double>& tool_length_mm, const std::array<double, 3>& rotate_deg) {
+  SetupCandidate c;
+  c.rotate_deg = rotate_deg;
+  c.min_singular_deg = 180;
+  PostJob post = job.post;
+  post.setup_rotate_deg = rotate_deg;
+  for (size_t k = 0; k < cl.size(); ++k) {
+    std::vector<ToolPose> poses;
+    for (const ClMove& mv : cl[k]->moves)
+      if (!mv.rapid) poses.push_back(to_work(post, mv.pose));
+    if (poses.size() < 2) continue;
+    PathOptions po;
+    po.tool_length_mm = tool_length_mm[k];
+    po.tolerance_mm = job.post.tolerance_mm;
+    po.angle_tolerance_deg = job.post.angle_tolerance_deg;
+    const JointPath path = solve_path(m, poses, {}, po);
+    if (!path.reachable) {
+      c.reachable = false;
+      c.why = fmt::format("patch {} pose {}: {}", k + 1, path.failed_pose, path.why);
+      return c;
+    }
+    c.singular_stretches += int(singular_stretches(path).size());
+    for (size_t j = 0; j < path.poses.size(); ++j) {
+      c.min_singular_deg = std::min(c.min_singular_deg, singularity_angle_deg(m, path.poses[j].axis));
+      if (j == 0) continue;
+      const double rot = std::abs(path.joints[j].rotary[0] - path.joints[j - 1].rotary[0]) +
+                         std::abs(path.joints[j].rotary[1] - path.joints[j - 1].rotary[1]);
+      const double turn = std::atan2(path.poses[j].axis.cross(path.poses[j - 1].axis).norm(),
+                                     path.poses[j].axis.dot(path.poses[j - 1].axis)) * 180 / M_PI;
+      if (rot >= 0.1) c.max_rotary_per_deg = std::max(c.max_rotary_per_deg, rot / std::max(turn, 1e-3));
+    }
+  }
+  return c;
+}
+}  // namespace
+
+SetupDecision choose_setup(const Job& job, const Machine& m, const std::vector<const ClProgram*>& cl,
+                           const std::vector<double>& tool_length_mm) {
+  constexpr double kClearDeg = 10;  // the tool axis at least this far from a singular orientation
+  SetupDecision d;
+  std::vector<std::array<double, 3>> rotations;
+  for (const double c : {0.0, 90.0, 180.0, 270.0})
+    for (const double mag : {0.0, 15.0, 30.0})
+      for (const double a : {0.0, mag, -mag})
+        for (const double b : {0.0, mag, -mag})
+          if (std::max(std::abs(a), std::abs(b)) == mag &&
+              std::find(rotations.begin(), rotations.end(), std::array<double, 3>{a, b, c}) == rotations.end())
+            rotations.push_back({a, b, c});
+  std::optional<SetupCandidate> best, farthest;
+  for (const auto& r : rotations) {
+    const SetupCandidate c = evaluate_setup(job, m, cl, tool_length_mm, r);
+    ++d.candidates;
+    if (r == std::array<double, 3>{0, 0, 0}) d.unrotated = c;
+    if (!c.reachable) continue;
+    if (!farthest || c.min_singular_deg > farthest->min_singular_deg + 1e-9) farthest = c;
+    if (!best && c.singular_stretches == 0 && c.min_singular_deg >= kClearDeg) best = c;
+  }
+  if (!best && !farthest)
+    throw InputError(fmt::format("{}: post.setup: auto: no candidate rotation reaches every pose on {} (unrotated: {})",
+                                 job.file.string(), m.name, d.unrotated.why));
+  d.chosen = best ? *best : *farthest;
+  const SetupCandidate& c = d.chosen;
+  const SetupCandidate& u = d.unrotated;
+  d.reason = fmt::format(
+      "post.setup auto: rotate [{}, {}, {}] of {} candidates: {} singular stretch(es), tool axis >= {:.1f} deg from a "
+      "singular orientation, at most {:.1f} deg of rotary travel per deg of axis turn{}",
+      c.rotate_deg[0], c.rotate_deg[1], c.rotate_deg[2], d.candidates, c.singular_stretches, c.min_singular_deg,
+      c.max_rotary_per_deg,
+      !u.reachable ? fmt::format(" (unrotated: out of reach, {})", u.why)
+                   : fmt::format(" (unrotated: {} stretch(es), {:.1f} deg, {:.1f} deg/deg)", u.singular_stretches,
+                                 u.min_singular_deg, u.max_rotary_per_deg));
+  if (!best) d.reason += fmt::format("; no candidate keeps {} deg from it, this one is the farthest", kClearDeg);
+  return d;
+}
+
 RunResult run(Job job, Machine machine, const RunOptions& options) {
   RunResult r;
   r.settings = settings_of(job);
@@ -126,6 +205,15 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
   const bool one_tool = job.tool.shared || job.tool.catalogue.has_value();
   r.fit = fit_run(std::move(job), options, [one_tool](size_t k) { return one_tool ? 1 : int(k) + 1; });
   r.machine = std::move(machine);
+  if (r.fit.job.post.setup_auto) {
+    std::vector<const ClProgram*> cl;
+    std::vector<double> lengths;
+    for (size_t k = 0; k < r.fit.fitted.patches.size(); ++k)
+      if (r.fit.cl_data[k]) cl.push_back(&*r.fit.cl_data[k]), lengths.push_back(tool_length(r.fit.job, r.fit.fitted.patches[k]));
+    r.setup = choose_setup(r.fit.job, r.machine, cl, lengths);
+    r.fit.job.post.setup_rotate_deg = r.setup->chosen.rotate_deg;
+    options.progress(r.setup->reason);
+  }
   const Job& j = r.fit.job;
   const ThreadScope threads(options.threads);
   // Kinematics and programs for every patch allowed to run, all solved before any file is written:

@@ -5,6 +5,7 @@
 //   run:  read job -> fit -> check -> kinematics -> post    (flankcam run)
 //   post: APT files -> kinematics -> post                   (flankcam post)
 #pragma once
+#include <array>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -50,6 +51,27 @@ struct FitRun {
   FitRun(const FitRun&) = delete;
 };
 
+// `post.setup: auto`: one candidate rotation of the part on the table and how its motion runs.
+struct SetupCandidate {
+  std::array<double, 3> rotate_deg{0, 0, 0};  // as post.setup.rotate: about X, then Y, then Z
+  bool reachable = true;
+  std::string why;                  // unreachable: the first patch and pose that is out of reach
+  int singular_stretches = 0;       // kinematics/path.h singular_stretches over every patch
+  double min_singular_deg = 0;      // closest approach of the tool axis to a singular orientation
+  double max_rotary_per_deg = 0;    // largest rotary travel per degree of tool-axis turn in a block
+};
+struct SetupDecision {
+  SetupCandidate chosen, unrotated;  // unrotated: rotate [0, 0, 0] for comparison
+  int candidates = 0;
+  std::string reason;                // one sentence: what was chosen and why
+};
+// Tries rotations about X and Y of 0, +-15, +-30 deg combined with 0, 90, 180, 270 deg about the
+// table normal (Z), with the job's translation: the first (in that order, least rotation first)
+// whose every patch is reachable, has no singular stretch and keeps the tool axis at least 10 deg
+// from a singular orientation; else the reachable one farthest from it. `cl`: per patch (part frame).
+[[nodiscard]] SetupDecision choose_setup(const Job& job, const Machine& m, const std::vector<const ClProgram*>& cl,
+                                         const std::vector<double>& tool_length_mm);
+
 // `flankcam run`: the fit (CL-data with tool numbers 1, 2, ... per patch), the machine, and the
 // posted programs (per dialect: one per allowed patch, then all-patches when more than one).
 struct RunResult {
@@ -58,6 +80,7 @@ struct RunResult {
   PostSettings settings;
   std::vector<PostedProgram> programs;
   std::vector<double> tool_length_mm;  // per patch, spindle nose to tip
+  std::optional<SetupDecision> setup;   // post.setup: auto (the job's post.setup_rotate_deg is the chosen one)
 };
 
 // The name of the program that runs all patches of `flankcam run` in order.

@@ -81,7 +81,9 @@ std::vector<Eigen::Vector2d> read_meridian(const std::string& path) {
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (line.empty() || line[0] == '#' || line.rfind("z_mm", 0) == 0) continue;
     const size_t comma = line.find(',');
-    const auto z = parse_number(line.substr(0, comma)), r = comma == std::string::npos ? std::nullopt : parse_number(line.substr(comma + 1));
+    const std::optional<double> z = parse_number(line.substr(0, comma));
+    std::optional<double> r;
+    if (comma != std::string::npos) r = parse_number(line.substr(comma + 1));
     if (!z || !r) throw InputError(fmt::format("{}:{}: expected 'z_mm,r_mm'", path, n));
     out.emplace_back(*z, *r);
   }
@@ -104,6 +106,28 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
     if (!n || *n < 0 || *n != std::floor(*n)) throw InputError("--tool " + t + ": expected T=FILE, e.g. 2=cone-2-tool.csv");
     given[int(*n)] = read_meridian(t.substr(eq + 1));
   }
+  std::map<std::string, std::vector<std::string>> given_cl;  // --cl PROGRAM=FILE, by program
+  for (const std::string& c : request.cl) {
+    const size_t eq = c.find('=');
+    if (eq == std::string::npos || eq == 0 || eq + 1 == c.size())
+      throw InputError("--cl " + c + ": expected PROGRAM=FILE, e.g. cone-1.ngc=cone-1.apt");
+    const std::string program = c.substr(0, eq);
+    if (std::none_of(request.programs.begin(), request.programs.end(), [&](const std::string& p) { return p == program; }))
+      throw InputError("--cl " + c + ": " + program + " is not one of the programs to verify");
+    given_cl[program].push_back(c.substr(eq + 1));
+  }
+  // post.setup: auto: the rotation the run chose, from the first program's header (every program of a
+  // run says its work frame).
+  if (job.post.setup_auto && !request.programs.empty() && !is_cl_data_file(request.programs.front())) {
+    static const std::regex frame(R"(work frame = part rotated X (\S+) Y (\S+) Z (\S+) deg)");
+    const std::string text = read_text(request.programs.front());
+    std::smatch mt;
+    if (!std::regex_search(text, mt, frame))
+      throw InputError(job.file.string() + ": post.setup: auto: " + request.programs.front() +
+                       " does not say its work frame; give the rotation as post.setup.rotate");
+    for (size_t k = 0; k < 3; ++k)
+      if (const auto v = parse_number(mt[k + 1].str())) job.post.setup_rotate_deg[k] = *v;
+  }
   // The part and the design surface on the machine (work frame), as the run checks its programs.
   const LoadedMesh surface = load_job_surface(job, progress);
   SurfaceIndex design(to_work(job.post, surface.mesh));
@@ -111,6 +135,8 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
   if (std::optional<LoadedMesh> part = load_job_part(job)) separate.emplace(to_work(job.post, std::move(part->mesh)));
   VerifyOptions vo;
   vo.gouge_tolerance_mm = job.tolerance_mm;
+  vo.cl_tolerance_mm = job.post.tolerance_mm + VerifyOptions{}.cl_tolerance_mm - PostJob{}.tolerance_mm;
+  vo.cl_angle_tolerance_deg = job.post.angle_tolerance_deg + VerifyOptions{}.cl_angle_tolerance_deg - PostJob{}.angle_tolerance_deg;
   VerifyRun run{std::move(job), std::move(m), vo, std::move(design), separate ? separate->mesh() : TriMesh{}, {}};
   const Job& j = run.job;
   const SurfaceIndex& part = separate ? *separate : run.design;
@@ -158,7 +184,32 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
       for (const auto& [number, name] : names) tools.push_back(tool_for(number, name));
       r.meridian = tools.front().assembly.cutter;
       r.tools = tools;
-      r.report = verify_text(text, dialect_of_file(file), file, run.machine, part, tools, run.options, &run.design);
+      // The CL-data the program was posted from (part coordinates, placed like the part).
+      std::vector<ClReference> cl;
+      const auto load_cl = [&](const std::string& apt, int tool) {
+        ClReference ref{tool, read_apt(apt), apt};
+        for (ClMove& mv : ref.cl.moves) mv.pose = to_work(j.post, mv.pose);
+        r.cl_files.push_back(apt);
+        cl.push_back(std::move(ref));
+      };
+      if (given_cl.count(file)) {
+        const std::vector<std::string>& files = given_cl[file];
+        for (const std::string& apt : files) load_cl(apt, 0);
+        if (files.size() > 1)
+          for (ClReference& ref : cl) ref.tool = ref.cl.tool;
+      } else {
+        std::vector<std::string> missing;
+        const std::map<int, std::string> named = names.empty() ? std::map<int, std::string>{{0, path.stem().string()}} : names;
+        for (const auto& [number, name] : named) {
+          const fs::path apt = path.parent_path() / (name + ".apt");
+          if (fs::is_regular_file(apt)) load_cl(apt.string(), number);
+          else missing.push_back(apt.filename().string());
+        }
+        if (!missing.empty())
+          r.cl_note = fmt::format("no {} beside the program (or --cl {}=FILE): {} compared with CL-data",
+                                  fmt::join(missing, ", "), file, cl.empty() ? "not" : "some tools' blocks not");
+      }
+      r.report = verify_text(text, dialect_of_file(file), file, run.machine, part, tools, run.options, &run.design, cl);
     }
     r.min_rapid_mm = r.min_feed_mm = {INFINITY, INFINITY, INFINITY};
     for (const VerifiedBlock& b : r.report.blocks) {
@@ -196,11 +247,11 @@ void write_verify(const VerifyRun& run, OutputDir& out) {
     const std::array<double, 3>& feed_min = r.min_feed_mm;
     nlohmann::ordered_json blocks = nlohmann::ordered_json::array();
     for (const VerifiedBlock& b : v.blocks)
-      blocks.push_back({b.line, b.rapid ? "rapid" : "feed", r4(b.min_clearance_mm[0]), r4(b.min_clearance_mm[1]),
+      blocks.push_back({b.line, b.tool_change ? "tool change" : b.rapid ? "rapid" : "feed", r4(b.min_clearance_mm[0]), r4(b.min_clearance_mm[1]),
                         r4(b.min_clearance_mm[2])});
     nlohmann::ordered_json hits = nlohmann::ordered_json::array();
     for (const VerifyHit& h : v.hits)
-      hits.push_back({{"line", h.line}, {"block", h.block}, {"motion", h.rapid ? "rapid" : "feed"}, {"kind", h.kind()},
+      hits.push_back({{"line", h.line}, {"block", h.block}, {"motion", h.tool_change ? "tool change" : h.rapid ? "rapid" : "feed"}, {"kind", h.kind()},
                       {"component", to_string(h.component)}, {"depth_mm", r4(h.depth_mm)}, {"point", round3(h.point)}});
     nlohmann::ordered_json viol = nlohmann::ordered_json::array();
     for (const AxisViolation& a : v.violations)
@@ -219,6 +270,21 @@ void write_verify(const VerifyRun& run, OutputDir& out) {
     e["min_clearance_feed_mm"] = mins_json(feed_min);
     e["collisions_and_gouges"] = hits;
     e["axis_violations"] = viol;
+    nlohmann::ordered_json cl_json;
+    cl_json["files"] = r.cl_files;
+    if (!r.cl_note.empty()) cl_json["note"] = r.cl_note;
+    cl_json["tolerance_mm"] = vo.cl_tolerance_mm;
+    cl_json["angle_tolerance_deg"] = vo.cl_angle_tolerance_deg;
+    cl_json["feed_blocks_compared"] = v.cl_blocks;
+    cl_json["max_deviation_mm"] = r4(v.cl_max_deviation_mm);
+    cl_json["max_angle_deg"] = r4(v.cl_max_angle_deg);
+    nlohmann::ordered_json off = nlohmann::ordered_json::array();
+    for (const ClDeviation& d : v.cl_deviations)
+      off.push_back({{"line", d.line}, {"block", d.block}, {"deviation_mm", r4(d.deviation_mm)}, {"angle_deg", r4(d.angle_deg)},
+                     {"tip", round3(d.tip)}});
+    cl_json["off_cl_data"] = off;
+    e["cl_data"] = cl_json;
+    e["tool_changes_simulated"] = v.tool_changes;
     e["cycle_minutes"] = r4(v.cycle_minutes);
     e["cut_minutes"] = r4(v.cut_minutes);
     e["design_surface"] = {{"vertices_reached", v.design.reached}, {"within_tolerance", v.design.within},

@@ -24,6 +24,9 @@ struct VerifyRequest {
   // "T=FILE": tool T's meridian CSV (z_mm,r_mm); T=0 for every tool. Default: NAME-tool.csv
   // beside the program, NAME from the program's tool-change comment (or the file's stem).
   std::vector<std::string> tools;
+  // "PROGRAM=FILE": the APT CL-data PROGRAM was posted from (several for several tools, matched by
+  // their LOADTL). Default: NAME.apt beside the program for each tool NAME of its tool-change comments.
+  std::vector<std::string> cl;
 };
 
 struct VerifiedProgram {
@@ -34,6 +37,8 @@ struct VerifiedProgram {
   bool cl_data = false;                              // APT CL-data: poses only, no machine axes
   std::array<double, 3> min_rapid_mm{}, min_feed_mm{};  // cutter, shank, holder clearance; +inf without blocks
   [[nodiscard]] double min_rapid_all_mm() const;
+  std::vector<std::string> cl_files;  // the CL-data the cutting blocks were compared with
+  std::string cl_note;                // why (some) blocks were not compared with CL-data, "" when all were
 };
 
 // Move-only (SurfaceIndex).

@@ -344,6 +344,7 @@ void set_axis(NcPoint& p, int k, double v) {
   else
     p.at.rotary[size_t(k - 3)] = v;
   p.known |= 1u << k;
+  p.stated |= 1u << k;
 }
 
 // One G-code line (iso, linuxcnc, sinumerik) without its comments; appends a point for a motion block.
@@ -354,6 +355,7 @@ void gcode_line(std::string s, Dialect d, const std::array<std::string, 2>& rota
   std::istringstream words(s);
   std::string w;
   bool moved = false;
+  st.point.stated = 0;
   while (words >> w) {
     if (d == Dialect::Sinumerik) {
       if (w == "TRAORI") { st.point.tcp = true; continue; }
@@ -429,6 +431,7 @@ void heidenhain_line(const std::string& s, const std::array<std::string, 2>& rot
   if (rest.rfind("L ", 0) != 0) fail(file, line, in_quotes(rest) + " is not a block flankcam writes");
   std::istringstream lw(rest.substr(2));
   bool rapid = false;
+  st.point.stated = 0;
   while (lw >> w) {
     if (w == "FMAX") { rapid = true; continue; }
     if (w == "R0") continue;

@@ -31,6 +31,7 @@ struct NcPoint {
   bool rapid = false;
   Joints at;                // X Y Z and the two rotary values (machine rotary order)
   unsigned known = 0;       // NcAxis mask of the values programmed so far
+  unsigned stated = AxesAll;  // NcAxis mask of the values this block writes (the others are modal)
   bool tcp = false;         // G43.4 / FUNCTION TCPM / TRAORI in force (LinuxCNC: always false, the machine decides)
   bool inverse_time = false;
   double f = 0;             // the F in force (1/min under G93, else mm/min)

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "core/errors.h"
 #include "core/message_text.h"
@@ -124,15 +125,6 @@ bool axial(const ToolPose& p, const ToolPose& q) {
   return d.norm() > 1e-9 && p.axis.cross(q.axis).norm() < 1e-9 && p.axis.cross(d).norm() <= 1e-6 * d.norm();
 }
 
-// Off the surface: the direction from the part's point nearest the middle of the cutter to the axis,
-// across the axis (the flank's normal at the contact line). The axis when the part lies on it.
-Eigen::Vector3d off_surface(const SurfaceIndex& part, const ToolPose& p, double cutter_length) {
-  const Eigen::Vector3d mid = p.tip + 0.5 * cutter_length * p.axis;
-  Eigen::Vector3d v = mid - part.closest(mid).point;
-  v -= v.dot(p.axis) * p.axis;
-  return v.norm() > 1e-6 ? Eigen::Vector3d(v.normalized()) : p.axis;
-}
-
 // The CL-data with its links planned against the part: its own approach (rapids before the first
 // feed move and axial lead-ins) and leave (axial lead-outs and trailing rapids) replaced by a rapid to
 // a point `lead` off the first pose along the surface normal, a feed in along the normal, the cut, and
@@ -153,10 +145,10 @@ ClProgram plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAs
   const ClMove &p0 = cl.moves[first], &p1 = cl.moves[last];
   ClProgram out = cl;
   out.moves.clear();
-  out.moves.push_back({{p0.pose.tip + lead * off_surface(part, p0.pose, a.cutter_length()), p0.pose.axis}, true, 0});
+  out.moves.push_back({{p0.pose.tip + lead * lead_direction(part, p0.pose, a.cutter_length()), p0.pose.axis}, true, 0});
   for (size_t k = first; k <= last; ++k) out.moves.push_back(cl.moves[k]);
   out.moves.back().rapid = false;
-  out.moves.push_back({{p1.pose.tip + lead * off_surface(part, p1.pose, a.cutter_length()), p1.pose.axis}, false,
+  out.moves.push_back({{p1.pose.tip + lead * lead_direction(part, p1.pose, a.cutter_length()), p1.pose.axis}, false,
                        p1.feed_mm_min > 0 ? p1.feed_mm_min : p0.feed_mm_min});
   for (ClMove& mv : out.moves)
     if (!mv.rapid && !(mv.feed_mm_min > 0)) mv.feed_mm_min = p0.feed_mm_min;
@@ -165,11 +157,15 @@ ClProgram plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAs
 
 // The part's highest point in the machine frame over the table angles the program uses (a 2 degree
 // grid over each table axis' range, plus what a point can rise between grid angles).
-double part_top_machine(const Machine& m, const SurfaceIndex& part, const std::vector<Solved>& solved) {
+// `also`: further rotary angles the program turns to at safe Z (the tool-change position's).
+double part_top_machine(const Machine& m, const SurfaceIndex& part, const std::vector<Solved>& solved,
+                        const std::array<std::optional<double>, 2>& also) {
   std::array<double, 2> lo{INFINITY, INFINITY}, hi{-INFINITY, -INFINITY};
   for (const Solved& s : solved)
     for (const Joints& q : s.path.joints)
       for (size_t k = 0; k < 2; ++k) lo[k] = std::min(lo[k], q.rotary[k]), hi[k] = std::max(hi[k], q.rotary[k]);
+  for (size_t k = 0; k < 2; ++k)
+    if (also[k]) lo[k] = std::min(lo[k], *also[k]), hi[k] = std::max(hi[k], *also[k]);
   constexpr double kStepDeg = 2;
   std::array<int, 2> steps{0, 0};
   double reach = 0;
@@ -192,8 +188,10 @@ double part_top_machine(const Machine& m, const SurfaceIndex& part, const std::v
   return top + turning * reach * (0.5 * kStepDeg * M_PI / 180);
 }
 
+// `preposition`: before each tool change but the first, the rotaries and X Y are taken to the machine's
+// tool-change position at safe Z, so the change macro only moves Z (its swing happens up there).
 Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const std::string& name,
-                 const std::vector<std::string>& header);
+                 const std::vector<std::string>& header, bool preposition);
 
 }  // namespace
 
@@ -203,13 +201,14 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
   if (!o.part) {
     std::vector<std::string> h = header;
     h.push_back("links not checked against the part (no part given): check the program in a simulator");
-    return post_once(inputs, m, o, name, h);
+    return post_once(inputs, m, o, name, h, false);
   }
   // Plan, emit, back-simulate the text; when a motion outside the cut hits the part, plan again with
   // the distances doubled (twice at most), else refuse.
   PostOptions attempt = o;
+  bool preposition = false;
   for (int tries = 0;; ++tries) {
-    Posted p = post_once(inputs, m, attempt, name, header);
+    Posted p = post_once(inputs, m, attempt, name, header, preposition);
     const std::string text = nc_text(p.program, {o.dialect, o.line_numbers, o.path.tolerance_mm});
     std::vector<VerifyTool> tools;
     for (const PostInput& in : inputs)
@@ -231,6 +230,11 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
       }
       return p;
     }
+    // A tool change that hits the part: its swing moves up to safe Z first.
+    if (!preposition && std::any_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.tool_change; })) {
+      preposition = true;
+      continue;
+    }
     attempt.safe_height_mm = 2 * attempt.safe_height_mm + attempt.clearance_mm;
     attempt.lead_mm *= 2;
     attempt.clearance_mm *= 2;
@@ -240,7 +244,7 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
 namespace {
 
 Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const std::string& name,
-                 const std::vector<std::string>& header) {
+                 const std::vector<std::string>& header, bool preposition) {
   if (inputs.empty()) throw InputError("post: no CL-data");
   const bool tcp = m.controller.tcp || m.controller.linuxcnc_trt;
   // LinuxCNC's trt kinematics turns two table axes; a head axis needs the controller's own TCP.
@@ -301,7 +305,11 @@ Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const P
     // joint, or the tip under TCP with a vertical table axis) is the tip's height.
     double r = 0;
     for (const Solved& s : solved) r = std::max(r, max_radius(s.assembly));
-    p.safe_z = part_top_machine(m, *o.part, solved) + std::max(o.safe_height_mm, o.clearance_mm) + (m.tables() < 2 ? r : 0);
+    int tools = 0;
+    for (size_t i = 0; i < inputs.size(); ++i) tools += i == 0 || inputs[i].cl.tool != inputs[i - 1].cl.tool;
+    std::array<std::optional<double>, 2> also;
+    if (preposition && tools > 1) also = {m.tool_change.joints[3], m.tool_change.joints[4]};
+    p.safe_z = part_top_machine(m, *o.part, solved, also) + std::max(o.safe_height_mm, o.clearance_mm) + (m.tables() < 2 ? r : 0);
   } else {
     // Joint values cannot go above the Z travel; the program's own highest point is below it.
     p.safe_z = top_z + o.safe_height_mm;
@@ -326,10 +334,41 @@ Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const P
     const Solved& s = solved[i];
     PostedSection sec;
     sec.patch = in.patch;
+    auto add_move = [&](bool rapid, unsigned axes, const Joints& at, const ToolPose& pose, int cl_move) {
+      NcMove mv;
+      mv.rapid = rapid;
+      mv.axes = axes;
+      mv.at = at;
+      mv.pose = pose;
+      mv.cl_move = cl_move;
+      p.blocks.push_back(mv);
+      current = at;
+    };
     sec.first_block = int(p.blocks.size());
     p.blocks.push_back(NcComment{"patch " + in.patch});
     for (const std::string& c : in.cl.comments) p.blocks.push_back(NcComment{c});
     if (in.cl.tool != tool) {
+      if (preposition && tool >= 0 && have_position) {
+        // To the tool-change position's rotaries, then its X Y, at safe Z (in machine joints; under TCP
+        // the tip that puts them there).
+        const double L = solved[i - 1].tool_length_mm;
+        const auto& tc = m.tool_change.joints;
+        Joints j = tcp ? Joints{linear_joints(m, programmed_pose(m, current, L), current.rotary, L), current.rotary} : current;
+        const auto program_at = [&](const Joints& q) { return tcp ? Joints{forward(m, q, L).tip, q.rotary} : q; };
+        if (tc[3] || tc[4]) {
+          Joints at = current;  // under TCP the tip is held while the rotaries turn
+          for (size_t k = 0; k < 2; ++k)
+            if (tc[3 + k]) at.rotary[k] = *tc[3 + k];
+          add_move(true, AxesRotary, at, programmed_pose(m, at, L), -1);
+          j = tcp ? Joints{linear_joints(m, programmed_pose(m, current, L), current.rotary, L), current.rotary} : current;
+        }
+        if (tc[0] || tc[1]) {
+          for (size_t k = 0; k < 2; ++k)
+            if (tc[k]) j.linear[k] = *tc[k];
+          const Joints at = program_at(j);
+          add_move(true, AxisX | AxisY, at, programmed_pose(m, at, L), -1);
+        }
+      }
       tool = in.cl.tool;
       const ToolDimensions dim = tool_dimensions(in.cl.profile);
       // L: the length the program is posted with (spindle nose to tip on head machines), else the cutter's.
@@ -349,16 +388,6 @@ Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const P
     }
     const std::vector<BlockFeed> bf = block_feeds(m, s.path, feed);
 
-    auto add_move = [&](bool rapid, unsigned axes, const Joints& at, const ToolPose& pose, int cl_move) {
-      NcMove mv;
-      mv.rapid = rapid;
-      mv.axes = axes;
-      mv.at = at;
-      mv.pose = pose;
-      mv.cl_move = cl_move;
-      p.blocks.push_back(mv);
-      current = at;
-    };
     size_t j = 0;
     for (size_t k = 0; k < cl.moves.size(); ++k) {
       // Output poses j..jk end in CL move k (jk is the input pose itself).

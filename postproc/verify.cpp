@@ -4,6 +4,7 @@
 
 #include <Eigen/Geometry>
 #include <algorithm>
+#include <climits>
 #include <cmath>
 #include <filesystem>
 #include <functional>
@@ -19,20 +20,44 @@ std::string VerifyOptions::validate() const {
   if (!(step_mm > 0) || !std::isfinite(step_mm)) return "step_mm: must be > 0";
   if (!(cutter_slab_mm > 0) || !std::isfinite(cutter_slab_mm)) return "cutter_slab_mm: must be > 0";
   if (!(report_clearance_mm > 0) || !std::isfinite(report_clearance_mm)) return "report_clearance_mm: must be > 0";
+  if (!(cl_tolerance_mm > 0) || !std::isfinite(cl_tolerance_mm)) return "cl_tolerance_mm: must be > 0";
+  if (!(cl_angle_tolerance_deg > 0) || !std::isfinite(cl_angle_tolerance_deg)) return "cl_angle_tolerance_deg: must be > 0";
   return {};
 }
 
 std::string VerifyHit::kind() const { return !rapid && component == Component::Tool ? "gouge" : "collision"; }
 
 std::string VerifyReport::first_problem(const std::string& file) const {
-  if (hits.empty()) return {};
-  const VerifyHit& h = *std::max_element(hits.begin(), hits.end(), [](const VerifyHit& a, const VerifyHit& b) {
-    return std::make_tuple(-a.line, a.depth_mm) < std::make_tuple(-b.line, b.depth_mm);  // the first line, its deepest
-  });
-  return fmt::format("{}:{}: {} {} {:.3f} mm deep at ({:.3f}, {:.3f}, {:.3f}) in motion block {} ({}); {} block(s) "
-                     "hit the part",
-                     file, h.line, to_string(h.component), h.kind(), h.depth_mm, h.point.x(), h.point.y(), h.point.z(),
-                     h.block, h.rapid ? "rapid" : "feed", hits.size());
+  if (clean()) return {};
+  int first = INT_MAX;
+  for (const VerifyHit& h : hits) first = std::min(first, h.line);
+  for (const ClDeviation& d : cl_deviations) first = std::min(first, d.line);
+  const std::string tail = fmt::format("; {} block(s) hit the part, {} cutting block(s) off the CL-data", hits.size(),
+                                       cl_deviations.size());
+  const VerifyHit* worst = nullptr;  // the first line's deepest hit
+  for (const VerifyHit& h : hits)
+    if (h.line == first && (!worst || h.depth_mm > worst->depth_mm)) worst = &h;
+  if (worst) {
+    const VerifyHit& h = *worst;
+    return fmt::format("{}:{}: {} {} {:.3f} mm deep at ({:.3f}, {:.3f}, {:.3f}) in {} {} ({})", file, h.line,
+                       to_string(h.component), h.kind(), h.depth_mm, h.point.x(), h.point.y(), h.point.z(),
+                       h.tool_change ? "the tool change before motion block" : "motion block", h.block,
+                       h.tool_change ? "tool change" : h.rapid ? "rapid" : "feed") +
+           tail;
+  }
+  const ClDeviation& d = *std::find_if(cl_deviations.begin(), cl_deviations.end(),
+                                       [&](const ClDeviation& c) { return c.line == first; });
+  return fmt::format("{}:{}: cutting block off the CL-data by {:.3f} mm (axis {:.3f} deg) with the tip at ({:.3f}, {:.3f}, "
+                     "{:.3f}) in motion block {} (feed)",
+                     file, d.line, d.deviation_mm, d.angle_deg, d.tip.x(), d.tip.y(), d.tip.z(), d.block) +
+         tail;
+}
+
+Eigen::Vector3d lead_direction(const SurfaceIndex& part, const ToolPose& p, double cutter_length_mm) {
+  const Eigen::Vector3d mid = p.tip + 0.5 * cutter_length_mm * p.axis;
+  Eigen::Vector3d v = mid - part.closest(mid).point;
+  v -= v.dot(p.axis) * p.axis;
+  return v.norm() > 1e-6 ? Eigen::Vector3d(v.normalized()) : p.axis;
 }
 
 bool is_cl_data_file(const std::string& path) {
@@ -141,7 +166,8 @@ std::vector<AxialSample> axial_samples(const ToolAssembly& a, const VerifyOption
 
 struct SimBlock {
   int block = 0, line = 0, tool = 0;
-  bool rapid = false;
+  bool rapid = false, tool_change = false;
+  ToolPose start;                   // where the block starts (the previous block's end)
   const VerifyTool* vt = nullptr;
   std::vector<ToolPose> positions;  // the block's end included, its start (the previous end) not
   std::vector<Joints> programmed;   // per position: the axis values as programmed (NC programs only)
@@ -164,6 +190,7 @@ void sweep(const SurfaceIndex& part, const std::vector<SimBlock>& blocks, const 
     const Body body(current->assembly);
     VerifiedBlock vb;
     vb.block = sb.block, vb.line = sb.line, vb.rapid = sb.rapid, vb.tool = sb.tool, vb.minutes = sb.minutes;
+    vb.tool_change = sb.tool_change;
     vb.min_clearance_mm.fill(o.report_clearance_mm);
     std::array<VerifyHit, 3> worst;
     for (auto& w : worst) w.depth_mm = -INFINITY;
@@ -185,6 +212,7 @@ void sweep(const SurfaceIndex& part, const std::vector<SimBlock>& blocks, const 
         if (hit && -g > worst[size_t(comp)].depth_mm) {
           VerifyHit& h = worst[size_t(comp)];
           h.block = sb.block, h.line = sb.line, h.rapid = sb.rapid, h.component = comp;
+          h.tool_change = sb.tool_change;
           h.depth_mm = -g;
           h.point = f.point;
           h.position = int(rep.positions - 1);
@@ -270,6 +298,8 @@ int steps_for(const std::function<ToolPose(double)>& at, double reach, double st
   return std::max(1, int(std::ceil(travel / step)));
 }
 
+bool same_rotaries(const Joints& a, const Joints& b) { return a.rotary == b.rotary; }
+
 void check_machine_axes(const Machine& m, const Joints& a, const Joints& b, double minutes, const SimBlock& sb,
                         VerifyReport& rep) {
   for (int k = 0; k < 5; ++k) {
@@ -292,9 +322,127 @@ void check_machine_axes(const Machine& m, const Joints& a, const Joints& b, doub
 
 }  // namespace
 
+namespace {
+
+// The CL motion of one tool: its feed segments (tip on a line, axis on a great circle).
+struct ClMotion {
+  const ClReference* ref = nullptr;
+  std::vector<std::pair<ToolPose, ToolPose>> segments;
+};
+
+struct ClFit {
+  double tip_mm = INFINITY, angle_deg = INFINITY;
+  [[nodiscard]] double score(const VerifyOptions& o) const {
+    return std::max(tip_mm / o.cl_tolerance_mm, angle_deg / o.cl_angle_tolerance_deg);
+  }
+};
+
+double angle_deg(const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+  return std::atan2(a.cross(b).norm(), a.dot(b)) / kDeg;
+}
+
+// The nearest point of the CL motion to a pose: per segment the parameter nearest the tip and the one
+// nearest the axis, the better of the two by the tolerances.
+ClFit nearest_on_cl(const ClMotion& cl, const ToolPose& p, const VerifyOptions& o) {
+  ClFit best;
+  double best_score = INFINITY;
+  for (const auto& [a, b] : cl.segments) {
+    const Eigen::Vector3d d = b.tip - a.tip;
+    const double l2 = d.squaredNorm();
+    double u_tip = l2 > 1e-18 ? std::clamp((p.tip - a.tip).dot(d) / l2, 0.0, 1.0) : 0.0;
+    double u_axis = u_tip;
+    const double turn = std::acos(std::clamp(a.axis.dot(b.axis), -1.0, 1.0));
+    if (turn > 1e-9) {
+      const Eigen::Vector3d e2 = (b.axis - a.axis.dot(b.axis) * a.axis).normalized();
+      u_axis = std::clamp(std::atan2(p.axis.dot(e2), p.axis.dot(a.axis)) / turn, 0.0, 1.0);
+    }
+    for (const double u : {u_tip, u_axis}) {
+      const ToolPose q = interpolate(a, b, u);
+      const ClFit f{(p.tip - q.tip).norm(), angle_deg(p.axis, q.axis)};
+      if (f.score(o) < best_score) best_score = f.score(o), best = f;
+    }
+  }
+  return best;
+}
+
+// A lead block of the planner (nc_program.cpp plan_links): the axis held, one end on the CL motion and
+// every position on the line from there along the surface normal (lead_direction).
+bool is_lead(const SimBlock& sb, const ClMotion& cl, const SurfaceIndex& part, const VerifyOptions& o) {
+  const ToolPose& end = sb.positions.back();
+  if (angle_deg(sb.start.axis, end.axis) > o.cl_angle_tolerance_deg) return false;
+  const double L = sb.vt->assembly.cutter_length();
+  for (const ToolPose* on : {&sb.start, &end}) {
+    if (nearest_on_cl(cl, *on, o).score(o) > 1) continue;
+    const ToolPose& off = on == &end ? sb.start : end;
+    const Eigen::Vector3d dir = lead_direction(part, *on, L);
+    if ((off.tip - on->tip).dot(dir) <= 0) continue;
+    bool along = true;
+    for (const ToolPose& q : sb.positions) {
+      const Eigen::Vector3d v = q.tip - on->tip;
+      along &= (v - v.dot(dir) * dir).norm() <= o.cl_tolerance_mm && angle_deg(q.axis, on->axis) <= o.cl_angle_tolerance_deg;
+    }
+    if (along) return true;
+  }
+  return false;
+}
+
+// Every feed block against the CL-data of its tool: the worst position of each block off it.
+void compare_with_cl(const std::vector<SimBlock>& blocks, const std::vector<ClReference>& refs, const SurfaceIndex& part,
+                     const VerifyOptions& o, VerifyReport& rep) {
+  std::vector<ClMotion> motions;
+  for (const ClReference& r : refs) {
+    ClMotion cm;
+    cm.ref = &r;
+    for (size_t k = 1; k < r.cl.moves.size(); ++k)
+      if (!r.cl.moves[k].rapid) cm.segments.emplace_back(r.cl.moves[k - 1].pose, r.cl.moves[k].pose);
+    motions.push_back(std::move(cm));
+  }
+  const auto motion_for = [&](int tool) -> const ClMotion* {
+    for (const ClMotion& c : motions)
+      if (c.ref->tool == tool) return &c;
+    for (const ClMotion& c : motions)
+      if (c.ref->tool == 0) return &c;
+    return nullptr;
+  };
+  rep.cl_compared = true;
+  for (const SimBlock& sb : blocks) {
+    if (sb.rapid || sb.tool_change || sb.block == 0) continue;
+    const ClMotion* cl = motion_for(sb.tool);
+    if (!cl) continue;  // a tool without CL-data: checked geometrically only
+    if (cl->segments.empty()) {  // CL-data without a feed move: nothing may cut
+      rep.cl_deviations.push_back({sb.block, sb.line, INFINITY, INFINITY, sb.positions.back().tip});
+      continue;
+    }
+    ++rep.cl_blocks;
+    ClFit worst{0, 0};
+    Eigen::Vector3d worst_tip = sb.positions.back().tip;
+    for (const ToolPose& q : sb.positions) {
+      const ClFit f = nearest_on_cl(*cl, q, o);
+      if (f.score(o) > worst.score(o)) worst = f, worst_tip = q.tip;
+    }
+    if (worst.score(o) <= 1) {
+      rep.cl_max_deviation_mm = std::max(rep.cl_max_deviation_mm, worst.tip_mm);
+      rep.cl_max_angle_deg = std::max(rep.cl_max_angle_deg, worst.angle_deg);
+      continue;
+    }
+    if (is_lead(sb, *cl, part, o)) continue;
+    rep.cl_deviations.push_back({sb.block, sb.line, worst.tip_mm, worst.angle_deg, worst_tip});
+  }
+}
+
+Eigen::Vector3d bounding_centre(const TriMesh& mesh, double* radius) {
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(INFINITY), hi = -lo;
+  for (const Eigen::Vector3d& v : mesh.vertices) lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
+  if (mesh.vertices.empty()) lo = hi = Eigen::Vector3d::Zero();
+  *radius = 0.5 * (hi - lo).norm();
+  return 0.5 * (lo + hi);
+}
+
+}  // namespace
+
 VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& m, bool linuxcnc_trt,
                             const SurfaceIndex& part, const std::vector<VerifyTool>& tools, const VerifyOptions& o,
-                            const SurfaceIndex* design) {
+                            const SurfaceIndex* design, const std::vector<ClReference>& cl) {
   if (std::string why = o.validate(); !why.empty()) throw InputError("verify options: " + why);
   if (tools.empty()) throw InputError("verify: no tool");
   VerifyReport rep;
@@ -310,19 +458,83 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
     for (auto p = pts.begin(); p != first; ++p) (k < 3 ? p->at.linear[k] : p->at.rotary[size_t(k - 3)]) = v;
   }
   const auto tcp_of = [&](const NcPoint& p) { return linuxcnc_trt || p.tcp; };
+  const auto value = [](Joints& j, int k) -> double& { return k < 3 ? j.linear[k] : j.rotary[size_t(k - 3)]; };
+  // Machine joints of programmed values (under TCP the controller computes the linear joints).
+  const auto machine_joints = [&](const Joints& at, bool tcp, double L) {
+    if (!tcp) return at;
+    const ToolPose pose{at.linear, forward(m, at, L).axis};
+    return Joints{linear_joints(m, pose, at.rotary, L), at.rotary};
+  };
+  double part_radius = 0;
+  const Eigen::Vector3d part_centre = bounding_centre(part.mesh(), &part_radius);
+
   std::vector<SimBlock> blocks;
+  Joints cur = pts[0].at;  // the programmed values in force
   for (size_t i = 0; i < pts.size(); ++i) {
     const NcPoint& pt = pts[i];
-    const NcPoint& prev = i > 0 ? pts[i - 1] : pts[i];
+    const VerifyTool& vt = tool_for(tools, pt.tool);
+    const double L = vt.length_mm;
+    const bool tcp = tcp_of(pt);
+    if (i > 0 && pt.tool != pts[i - 1].tool) {
+      // The tool-change macro with the old tool in machine joints: Z, then X Y, then the rotaries.
+      const VerifyTool& old = tool_for(tools, pts[i - 1].tool);
+      const auto& tc = m.tool_change.joints;
+      Joints from = machine_joints(cur, tcp_of(pts[i - 1]), old.length_mm);
+      for (int leg = 0; leg < 3; ++leg) {
+        Joints to = from;
+        if (leg == 0) to.linear.z() = tc[2] ? *tc[2] : m.linear[2].max_mm;
+        for (int k : leg == 1 ? std::vector<int>{0, 1} : leg == 2 ? std::vector<int>{3, 4} : std::vector<int>{})
+          if (tc[size_t(k)]) value(to, k) = *tc[size_t(k)];
+        double minutes = 0;
+        for (int k = 0; k < 5; ++k) {
+          const double v = k < 3 ? m.linear[size_t(k)].max_speed_mm_min : m.rotary[size_t(k - 3)].max_speed_deg_min;
+          minutes = std::max(minutes, std::abs(value(to, k) - value(from, k)) / v);
+        }
+        if (!(minutes > 0)) continue;
+        SimBlock sb;
+        sb.block = int(i), sb.line = pt.line, sb.rapid = true, sb.tool_change = true, sb.tool = pts[i - 1].tool;
+        sb.vt = &old;
+        sb.minutes = minutes;
+        const auto joints_at = [&](double f) {
+          Joints q;
+          q.linear = (1 - f) * from.linear + f * to.linear;
+          for (size_t k = 0; k < 2; ++k) q.rotary[k] = (1 - f) * from.rotary[k] + f * to.rotary[k];
+          return q;
+        };
+        const auto at = [&](double f) { return forward(m, joints_at(f), old.length_mm); };
+        sb.start = at(0);
+        // With the rotaries held the tip moves on a line: beyond the part's bounding sphere, grown by the
+        // assembly and the report distance, nothing can be touched (the travel may be a long way up).
+        double f_end = 1;
+        if (same_rotaries(from, to)) {
+          const Eigen::Vector3d p0 = at(0).tip, d = at(1).tip - p0, c = p0 - part_centre;
+          const double R = part_radius + old.assembly.total_length() + o.report_clearance_mm;
+          const double a2 = d.squaredNorm(), b = c.dot(d), disc = b * b - a2 * (c.squaredNorm() - R * R);
+          f_end = disc < 0 || a2 == 0 ? 0 : std::clamp((-b + std::sqrt(disc)) / a2, 0.0, 1.0);
+        }
+        const auto part_at = [&](double f) { return at(f * f_end); };
+        const int n = f_end > 0 ? steps_for(part_at, old.assembly.total_length(), o.step_mm) : 0;
+        for (int s = 1; s <= n; ++s) {  // the viewer shows the macro's machine joints
+          sb.positions.push_back(part_at(double(s) / n));
+          sb.programmed.push_back(joints_at(double(s) / n * f_end));
+        }
+        if (f_end < 1) sb.positions.push_back(at(1)), sb.programmed.push_back(joints_at(1));
+        blocks.push_back(std::move(sb));
+        from = to;
+      }
+      ++rep.tool_changes;
+      cur = tcp ? Joints{forward(m, from, L).tip, from.rotary} : from;
+    }
+    Joints target = cur;
+    for (int k = 0; k < 5; ++k)
+      if (pt.stated & (1u << k)) value(target, k) = k < 3 ? pt.at.linear[k] : pt.at.rotary[size_t(k - 3)];
     SimBlock sb;
     sb.block = int(i), sb.line = pt.line, sb.rapid = pt.rapid, sb.tool = pt.tool;
-    sb.vt = &tool_for(tools, pt.tool);
-    const double L = sb.vt->length_mm;
-    const bool tcp = tcp_of(pt);
+    sb.vt = &vt;
     const auto programmed = [&](double f) {
       Joints q;
-      q.linear = (1 - f) * prev.at.linear + f * pt.at.linear;
-      for (size_t k = 0; k < 2; ++k) q.rotary[k] = (1 - f) * prev.at.rotary[k] + f * pt.at.rotary[k];
+      q.linear = (1 - f) * cur.linear + f * target.linear;
+      for (size_t k = 0; k < 2; ++k) q.rotary[k] = (1 - f) * cur.rotary[k] + f * target.rotary[k];
       return q;
     };
     const auto at = [&](double f) {
@@ -330,15 +542,10 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
       const ToolPose fk = forward(m, q, L);
       return tcp ? ToolPose{q.linear, fk.axis} : fk;
     };
-    const int n = i == 0 ? 1 : steps_for(at, sb.vt->assembly.total_length(), o.step_mm);
+    sb.start = at(0);
+    const int n = i == 0 ? 1 : steps_for(at, vt.assembly.total_length(), o.step_mm);
     for (int s = 1; s <= n; ++s) sb.positions.push_back(at(double(s) / n)), sb.programmed.push_back(programmed(double(s) / n));
-    // Machine joints at both ends (under TCP the controller computes the linear joints).
-    const auto joints = [&](const NcPoint& p) {
-      if (!tcp_of(p)) return p.at;
-      const ToolPose pose{p.at.linear, forward(m, p.at, L).axis};
-      return Joints{linear_joints(m, pose, p.at.rotary, L), p.at.rotary};
-    };
-    const Joints ja = joints(prev), jb = joints(pt);
+    const Joints ja = machine_joints(cur, tcp, L), jb = machine_joints(target, tcp, L);
     if (pt.rapid) {
       for (int k = 0; k < 5; ++k) {
         const double d = k < 3 ? std::abs(jb.linear[k] - ja.linear[k]) : std::abs(jb.rotary[size_t(k - 3)] - ja.rotary[size_t(k - 3)]);
@@ -349,15 +556,17 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
       if (pt.inverse_time) {
         sb.minutes = 1 / pt.f;
       } else {
-        double dist = (pt.at.linear - prev.at.linear).norm();
-        if (dist < 1e-6) dist = std::hypot(pt.at.rotary[0] - prev.at.rotary[0], pt.at.rotary[1] - prev.at.rotary[1]);
+        double dist = (target.linear - cur.linear).norm();
+        if (dist < 1e-6) dist = std::hypot(target.rotary[0] - cur.rotary[0], target.rotary[1] - cur.rotary[1]);
         sb.minutes = dist / pt.f;
       }
     }
     check_machine_axes(m, ja, jb, sb.minutes, sb, rep);
     blocks.push_back(std::move(sb));
+    cur = target;
   }
   sweep(part, blocks, o, rep);
+  if (!cl.empty()) compare_with_cl(blocks, cl, part, o, rep);
   rep.motion = motion_of(blocks);
   if (design) rep.design = design_deviation(*design, blocks, o.gouge_tolerance_mm);
   return rep;
@@ -365,9 +574,9 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
 
 VerifyReport verify_text(const std::string& text, Dialect d, const std::string& file, const Machine& m,
                          const SurfaceIndex& part, const std::vector<VerifyTool>& tools, const VerifyOptions& o,
-                         const SurfaceIndex* design) {
+                         const SurfaceIndex* design, const std::vector<ClReference>& cl) {
   const std::vector<NcPoint> pts = parse_nc(text, d, {m.rotary[0].name, m.rotary[1].name}, file);
-  return verify_program(pts, m, d == Dialect::LinuxCnc && m.controller.linuxcnc_trt, part, tools, o, design);
+  return verify_program(pts, m, d == Dialect::LinuxCnc && m.controller.linuxcnc_trt, part, tools, o, design, cl);
 }
 
 VerifyReport verify_cl(const ClProgram& cl, const SurfaceIndex& part, const VerifyTool& tool, const VerifyOptions& o,

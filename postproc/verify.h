@@ -34,14 +34,43 @@ struct VerifyOptions {
   double step_mm = 0.25;             // no point of the assembly moves more than this between checked positions
   double cutter_slab_mm = 0.25;      // axial sampling of the cutter (shank and holder: 1 mm)
   double report_clearance_mm = 25;   // clearances beyond this are reported as this (the search stops there)
+  // Comparison with the CL-data (when given): every cutting position's tip within this of the CL
+  // motion and its axis within the angle of the CL axis there: the post's linearisation tolerances
+  // plus what writing 4 decimals and sampling between the linearisation's checks may add.
+  double cl_tolerance_mm = 0.005 + 0.002;
+  double cl_angle_tolerance_deg = 0.05 + 0.01;
   std::string validate() const;
 };
+
+// The CL-data a program was posted from, in the program's frame (setup applied). Its feed motion
+// (tip on a line, axis on a great circle between consecutive GOTOs) is what the program's feed blocks
+// must follow; the planner's lead-in and lead-out (straight along the surface normal off a CL pose,
+// axis held: see lead_direction) are the only feed blocks allowed off it.
+struct ClReference {
+  int tool = 0;      // the program's T number it belongs to; 0: every tool
+  ClProgram cl;
+  std::string file;  // for messages
+};
+
+// A feed block that leaves the CL motion: its worst position.
+struct ClDeviation {
+  int block = 0, line = 0;
+  double deviation_mm = 0;  // the simulated tip's distance from the CL motion
+  double angle_deg = 0;     // the simulated axis' angle to the CL axis at the nearest point
+  Eigen::Vector3d tip = Eigen::Vector3d::Zero();  // simulated tip (program frame)
+};
+
+// The planner's direction off the surface at a pose: from the part's point nearest the middle of the
+// cutter to the axis, across the axis (the flank's normal at the contact line); the axis when the part
+// lies on it. Lead-in and lead-out run along it.
+[[nodiscard]] Eigen::Vector3d lead_direction(const SurfaceIndex& part, const ToolPose& p, double cutter_length_mm);
 
 // One motion block as simulated.
 struct VerifiedBlock {
   int block = 0;   // index among the motion blocks, 0-based
   int line = 0;    // 1-based line in the program text (APT: the GOTO's index + 1)
   bool rapid = false;
+  bool tool_change = false;  // a move of the tool-change macro (rapid, machine joints) before `line`
   int tool = 0;
   std::array<double, 3> min_clearance_mm{};  // cutter, shank, holder (Component order); negative: inside
   double minutes = 0;
@@ -50,6 +79,7 @@ struct VerifiedBlock {
 struct VerifyHit {
   int block = 0, line = 0;
   bool rapid = false;
+  bool tool_change = false;  // in the tool-change macro's moves before `line`
   Component component = Component::Tool;
   double depth_mm = 0;                            // how far inside the part (beyond nothing: raw depth)
   Eigen::Vector3d point = Eigen::Vector3d::Zero();  // the part point there (program frame)
@@ -82,12 +112,18 @@ struct VerifyReport {
   std::vector<VerifiedBlock> blocks;
   std::vector<VerifyHit> hits;            // worst per block and component
   std::vector<AxisViolation> violations;  // travel limits and speeds
+  bool cl_compared = false;               // CL-data was given: feed blocks compared with it
+  int cl_blocks = 0;                      // feed blocks compared (leads included)
+  double cl_max_deviation_mm = 0, cl_max_angle_deg = 0;  // largest over the compared positions
+  std::vector<ClDeviation> cl_deviations; // feed blocks off the CL motion
+  int tool_changes = 0;                   // tool changes simulated (moves to the change position and back)
   double cycle_minutes = 0, cut_minutes = 0;
   long positions = 0;                     // simulated positions
   std::vector<VerifiedPosition> motion;   // each of them, in order
   Deviation design;                       // empty unless a design surface was given
-  [[nodiscard]] bool clean() const { return hits.empty(); }
-  // "LINE N (block B): holder collision 1.234 mm at (x, y, z), rapid" for the deepest hit, or "".
+  [[nodiscard]] bool clean() const { return hits.empty() && cl_deviations.empty(); }
+  // "FILE:LINE: holder collision 1.234 mm deep at (x, y, z) in motion block B (rapid); ..." for the
+  // first line that hits the part or leaves the CL-data (its deepest hit), or "".
   [[nodiscard]] std::string first_problem(const std::string& file) const;
 };
 
@@ -101,14 +137,20 @@ struct ProgramRefused : std::runtime_error {
 [[nodiscard]] bool is_cl_data_file(const std::string& path);
 [[nodiscard]] Dialect dialect_of_file(const std::string& path);
 
-// `tools`: one per T number the program calls (or number 0 for all). `design` may be null.
+// `tools`: one per T number the program calls (or number 0 for all). `design` may be null. `cl`:
+// the CL-data per tool (empty: the program is checked geometrically only).
+// A tool change between motion blocks is simulated as the machine's change macro runs it
+// (Machine::tool_change: Z to its height, then X Y, then the rotaries, each given value only; the
+// default is Z at its upper limit) with the old tool, and the next block starts there with the new one.
 [[nodiscard]] VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& m, bool linuxcnc_trt,
                                           const SurfaceIndex& part, const std::vector<VerifyTool>& tools,
-                                          const VerifyOptions& o, const SurfaceIndex* design = nullptr);
+                                          const VerifyOptions& o, const SurfaceIndex* design = nullptr,
+                                          const std::vector<ClReference>& cl = {});
 // Reads the text (parse_nc) and simulates it.
 [[nodiscard]] VerifyReport verify_text(const std::string& text, Dialect d, const std::string& file, const Machine& m,
                                        const SurfaceIndex& part, const std::vector<VerifyTool>& tools,
-                                       const VerifyOptions& o, const SurfaceIndex* design = nullptr);
+                                       const VerifyOptions& o, const SurfaceIndex* design = nullptr,
+                                       const std::vector<ClReference>& cl = {});
 // APT CL-data: tip on a line and the axis turned on a great circle per GOTO, no machine.
 [[nodiscard]] VerifyReport verify_cl(const ClProgram& cl, const SurfaceIndex& part, const VerifyTool& tool,
                                      const VerifyOptions& o, const SurfaceIndex* design = nullptr);

@@ -90,8 +90,9 @@ TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm in
     REQUIRE(lines[index].find('Z') != std::string::npos);
     const int line = int(index) + 1;
     // On the table-table machine the tool stands along machine Z; 1 mm along machine X moves the
-    // cutter into the blade on one side and away from it on the other.
-    int refused = 0;
+    // cutter into the blade on one side and away from it on the other: the sweep sees the one, the
+    // comparison with cone-1.apt (beside the program) both.
+    int refused = 0, gouging = 0;
     for (const double delta : {-1.0, 1.0}) {
       CAPTURE(delta);
       const fs::path bad = fs::path(run) / "bad-1.ngc";  // beside cone-1-tool.csv under another name
@@ -109,16 +110,68 @@ TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm in
       const auto report = nlohmann::json::parse(test::read_text(out + "/verify.json"));
       const auto& p = report["programs"][0];
       CHECK(p["clean"] == false);
-      REQUIRE(!p["collisions_and_gouges"].empty());
+      gouging += !p["collisions_and_gouges"].empty();
       bool at_line = false;
       for (const auto& h : p["collisions_and_gouges"]) {
         at_line |= int(h["line"]) == line;
         CHECK(double(h["depth_mm"]) > 0.01);  // beyond the tolerance
         CHECK(double(h["depth_mm"]) < 1.1);   // no deeper than the move
       }
+      for (const auto& d : p["cl_data"]["off_cl_data"]) {
+        at_line |= int(d["line"]) == line;
+        // The tip's distance from the CL polyline: at most the 1 mm it moved.
+        CHECK(double(d["deviation_mm"]) > 0.1);
+        CHECK(double(d["deviation_mm"]) < 1.01);
+      }
       CHECK(at_line);
     }
-    CHECK(refused == 1);
+    CHECK(refused == 2);
+    CHECK(gouging == 1);
+  }
+
+  SUBCASE("one cutting block's Z lowered by 1 mm: exit 4 naming that line; without the CL-data it is said") {
+    const std::vector<std::string> lines = split_lines(test::read_text(program));
+    size_t g1 = 0;
+    while (g1 < lines.size() && lines[g1].find("G1 ") == std::string::npos) ++g1;
+    const size_t index = g1 + 40;
+    REQUIRE(index < lines.size());
+    REQUIRE(lines[index].find('Z') != std::string::npos);
+    const fs::path bad = fs::path(run) / "lowered.ngc";
+    test::write_text(bad.string(), moved(lines, index, 'Z', -1.0));
+    const Output r = run_program("verify --job " + job + " " + bad.string() + " --out " + dir.file("low"), dir);
+    INFO(r.out, r.err);
+    CHECK(r.code == 4);
+    CHECK(r.out.find(fmt::format("lowered.ngc:{}:", index + 1)) != std::string::npos);
+    const auto report = nlohmann::json::parse(test::read_text(dir.file("low/verify.json")));
+    const auto& cl = report["programs"][0]["cl_data"];
+    REQUIRE(cl["files"].size() == 1);
+    CHECK(std::string(cl["files"][0]).find("cone-1.apt") != std::string::npos);
+    CHECK(int(cl["feed_blocks_compared"]) > 50);
+
+    // The program and its tool alone in another folder: checked geometrically, and said so.
+    const fs::path alone = fs::path(dir.file("alone"));
+    fs::create_directories(alone);
+    fs::copy_file(program, alone / "cone-1.ngc");
+    fs::copy_file(fs::path(run) / "cone-1-tool.csv", alone / "cone-1-tool.csv");
+    const std::string copy = (alone / "cone-1.ngc").string();
+    const Output plain = run_program("verify --job " + job + " " + copy + " --out " + dir.file("alone-v"), dir);
+    INFO(plain.out, plain.err);
+    CHECK(plain.code == 0);
+    CHECK(plain.out.find("no cone-1.apt beside the program") != std::string::npos);
+    const auto plain_report = nlohmann::json::parse(test::read_text(dir.file("alone-v/verify.json")));
+    CHECK(plain_report["programs"][0]["cl_data"]["files"].empty());
+    CHECK(std::string(plain_report["programs"][0]["cl_data"]["note"]).find("not compared") != std::string::npos);
+    // --cl names it.
+    const Output given = run_program("verify --job " + job + " " + copy + " --cl " + copy + "=" +
+                                          (fs::path(run) / "cone-1.apt").string() + " --out " + dir.file("given-v"),
+                                      dir);
+    INFO(given.out, given.err);
+    CHECK(given.code == 0);
+    CHECK(given.out.find("cutting blocks on the CL-data") != std::string::npos);
+    // --cl for a program not verified: exit 2.
+    const Output wrong = run_program("verify --job " + job + " " + copy + " --cl other.ngc=x.apt --out " + dir.file("w"), dir);
+    CHECK(wrong.code == 2);
+    CHECK(wrong.err.find("--cl other.ngc=x.apt") != std::string::npos);
   }
 
   SUBCASE("--out naming an existing file: exit 2, nothing written") {

@@ -1,5 +1,6 @@
 #include <doctest/doctest.h>
 
+#include <fmt/format.h>
 #include <omp.h>
 #include <sys/wait.h>
 
@@ -67,4 +68,51 @@ TEST_CASE("cmake --install: the installed flankcam runs the bundled example from
   const std::string machine = report["machine"]["file"];
   CHECK(machine == fs::weakly_canonical(prefix + "/share/flankcam/machines/xyzac-trt.yaml").string());
   CHECK(fs::exists(dir.file("elsewhere/out/cone-3.ngc")));
+}
+
+TEST_CASE("post.setup: auto turns the conical-tool blade off the A = 0 singularity of xyzac-trt") {
+  // Unrotated, cone-1's tool axis stays within a few degrees of the C axis: C swings ~90 deg while
+  // the axis turns ~3 deg (a near-singular stretch). auto must choose a rotation without one.
+  test::ScratchDir dir("setup-auto");
+  const std::string blade = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj";
+  std::string job = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/examples/conical-tool/job.yaml");
+  const size_t s = job.find("surface: ../blade/blade.obj");
+  REQUIRE(s != std::string::npos);
+  job.replace(s, std::string("surface: ../blade/blade.obj").size(), "surface: " + blade);
+  const size_t p = job.find("post: {dialects: [linuxcnc]}");
+  REQUIRE(p != std::string::npos);
+  job.replace(p, std::string("post: {dialects: [linuxcnc]}").size(), "post: {dialects: [linuxcnc], setup: auto}");
+  test::write_text(dir.file("job.yaml"), job);
+  const pipeline::Job parsed = pipeline::read_job(dir.file("job.yaml"));
+  CHECK(parsed.post.setup_auto);
+  const test::RunResult r = test::run_flankcam("run " + dir.file("job.yaml") + " --quiet --out " + dir.file("out"), dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const auto& setup = report["setup"];
+  REQUIRE(setup.is_object());
+  CHECK(int(setup["unrotated"]["singular_stretches"]) > 0);
+  CHECK(double(setup["unrotated"]["max_rotary_deg_per_axis_deg"]) > 20);
+  CHECK(int(setup["chosen"]["singular_stretches"]) == 0);
+  CHECK(double(setup["chosen"]["min_singular_angle_deg"]) >= 10);
+  CHECK(setup["chosen"]["rotate_deg"] != nlohmann::json::array({0, 0, 0}));
+  CHECK(std::string(setup["reason"]).find("post.setup auto: rotate") == 0);
+  // Every program runs with the chosen setup and has no near-singular stretch.
+  int programs = 0;
+  for (const auto& patch : report["patches"])
+    for (const auto& prog : patch["programs"]) {
+      ++programs;
+      CHECK(prog["near_singular_stretches"].empty());
+    }
+  CHECK(programs == 3);
+  const std::string cone1 = test::read_text(dir.file("out/cone-1.ngc"));
+  const auto& rot = setup["chosen"]["rotate_deg"];
+  CHECK(cone1.find(fmt::format("work frame = part rotated X {} Y {} Z {} deg", double(rot[0]), double(rot[1]),
+                               double(rot[2]))) != std::string::npos);
+  // verify places the part with the chosen rotation (from the program's header): clean.
+  const test::RunResult v = test::run_flankcam("verify --job " + dir.file("job.yaml") + " " + dir.file("out/cone-1.ngc") +
+                                                   " --out " + dir.file("v"),
+                                               dir);
+  INFO(v.err);
+  CHECK(v.code == 0);
 }

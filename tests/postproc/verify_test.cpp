@@ -10,6 +10,7 @@
 #include "kinematics/machine.h"
 #include "postproc/gcode.h"
 #include "postproc/nc_program.h"
+#include "tests/test_util.h"
 
 using namespace flankcam;
 
@@ -282,4 +283,162 @@ TEST_CASE("the tool-change comment gives the length the program is posted with")
   // Table-table: the tool length does not enter the kinematics; the comment keeps the cutter's (25 mm).
   const Posted trt = post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped("xyzbc-trt"), o, "W", {});
   CHECK(nc_text(trt.program, {Dialect::Iso, false, 0.005}).find(" L25.000)") != std::string::npos);
+}
+
+namespace {
+double cylinder(double) { return 4; }
+
+// The wall pass's CL-data in the work frame, as verify loads NAME.apt beside a program.
+std::vector<ClReference> wall_cl(const std::function<double(double)>& r, const Eigen::Vector3d& origin) {
+  return {{0, pass(r, origin), "wall.apt"}};
+}
+}  // namespace
+
+TEST_CASE("every shipped machine and dialect: the posted wall pass lies on its CL-data, the planned leads excepted") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cylinder), origin));
+  for (const Case& c : cases()) {
+    CAPTURE(c.label);
+    const Posting p = post_wall(c, part, cylinder, origin);
+    const VerifyReport rep = verify_text(p.text, c.dialect, "wall", c.machine, part, p.tools, {}, nullptr, wall_cl(cylinder, origin));
+    CHECK(rep.cl_compared);
+    CHECK(rep.cl_deviations.empty());
+    CHECK(rep.clean());
+    // 20 CL feed moves plus the lead-in and lead-out along the normal (joints may add blocks).
+    CHECK(rep.cl_blocks >= 22);
+    CHECK(rep.cl_max_deviation_mm <= 0.007);
+  }
+}
+
+TEST_CASE("a cylinder's cutting block lowered 1 mm along its axis cuts nothing new, and is named by the CL comparison") {
+  // The tool slides along its own axis: the geometric sweep cannot see it, the CL-data can.
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cylinder), origin));
+  for (const Case& c : cases()) {
+    CAPTURE(c.label);
+    const Posting p = post_wall(c, part, cylinder, origin);
+    const std::vector<NcPoint> pts = parse_nc(p.text, c.dialect, p.posted.program.rotary_names, "wall");
+    const int line = cutting_line(p.text, pts);
+    const std::string edited = with_line(p.text, line, lower_z(line_of(p.text, line)));
+    const VerifyReport geometric = verify_text(edited, c.dialect, "wall", c.machine, part, p.tools, {});
+    CHECK(geometric.hits.empty());
+    CHECK(geometric.clean());
+    const VerifyReport rep = verify_text(edited, c.dialect, "wall", c.machine, part, p.tools, {}, nullptr, wall_cl(cylinder, origin));
+    CHECK(rep.hits.empty());
+    REQUIRE_FALSE(rep.cl_deviations.empty());
+    CHECK(rep.cl_deviations.front().line == line);
+    CHECK(rep.cl_deviations.front().deviation_mm == doctest::Approx(1).epsilon(0.01));
+    CHECK(rep.first_problem("wall").rfind("wall:" + std::to_string(line) + ": cutting block off the CL-data by 1.0", 0) == 0);
+    // The block after it climbs back: off too; nothing else is.
+    CHECK(rep.cl_deviations.size() <= 2);
+  }
+}
+
+TEST_CASE("a lead-out whose end is moved off the surface normal is off the CL-data") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cylinder), origin));
+  const Case c = cases()[3];  // xyzbc-head-table, iso, TCP
+  const Posting p = post_wall(c, part, cylinder, origin);
+  const std::vector<NcPoint> pts = parse_nc(p.text, c.dialect, p.posted.program.rotary_names, "wall");
+  int last_feed = 0;
+  for (const NcPoint& q : pts)
+    if (!q.rapid) last_feed = q.line;
+  const std::string edited = with_line(p.text, last_feed, lower_z(line_of(p.text, last_feed)));
+  const VerifyReport rep = verify_text(edited, c.dialect, "wall", c.machine, part, p.tools, {}, nullptr, wall_cl(cylinder, origin));
+  REQUIRE(rep.cl_deviations.size() == 1);
+  CHECK(rep.cl_deviations.front().line == last_feed);
+}
+
+namespace {
+// xyzac-trt changing tools at X 34 (the wall's plane, work x = 34) and the given Z and A.
+Machine swinging(std::optional<double> tc_z, std::optional<double> tc_a) {
+  Machine m = shipped("xyzac-trt");
+  m.tool_change.joints[0] = 34;
+  m.tool_change.joints[2] = tc_z;
+  m.tool_change.joints[3] = tc_a;
+  return m;
+}
+
+Posting post_two_tools(const Machine& m, const SurfaceIndex& part, const Eigen::Vector3d& origin) {
+  PostOptions o;
+  o.dialect = Dialect::Iso;
+  o.path.tool_length_mm = 80;
+  o.part = &part;
+  PostInput first{pass(cylinder, origin), "wall-1", 80, assembly_from_meridian(meridian(cylinder), holder())};
+  PostInput second = first;
+  second.patch = "wall-2", second.cl.tool = 2;
+  Posting p;
+  p.posted = post({first, second}, m, o, "WALLS", {"verify test"});
+  p.text = nc_text(p.posted.program, {Dialect::Iso, false, o.path.tolerance_mm});
+  p.tools = {{1, first.assembly, 80}, {2, second.assembly, 80}};
+  return p;
+}
+}  // namespace
+
+TEST_CASE("a tool change whose swing would cross the part is re-planned: the rotaries turn at a safe Z first") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cylinder), origin));
+  // The change position: X 34 Z 20 (5 mm above the wall's top at A 0) and A -90: turning A there
+  // swings the wall (85 mm from the A axis) through the tool.
+  const Machine m = swinging(20.0, -90.0);
+  const Posting p = post_two_tools(m, part, origin);
+  INFO(p.posted.refused);
+  REQUIRE(p.posted.refused.empty());
+  // Safe Z now clears the part over A 0 .. -90 (its far corner rises to z = -60 + 90).
+  CHECK(p.posted.program.safe_z > 40);
+  const VerifyReport rep = verify_text(p.text, Dialect::Iso, "walls", m, part, p.tools, {});
+  CHECK(rep.clean());
+  CHECK(rep.tool_changes == 1);
+  // The planner's swing before "T2 M6": without it the macro turns A at Z 100 through the part.
+  std::istringstream in(p.text);
+  std::vector<std::string> lines;
+  for (std::string l; std::getline(in, l);) lines.push_back(l);
+  const auto tc = std::find_if(lines.begin(), lines.end(), [](const std::string& l) { return l.find("T2 M6") != std::string::npos; });
+  REQUIRE(tc != lines.end());
+  auto swing = std::find_if(std::make_reverse_iterator(tc), lines.rend(), [](const std::string& l) { return l.find("A-90.") != std::string::npos; });
+  REQUIRE(swing != lines.rend());
+  const int swing_line = int(lines.rend() - swing);  // 1-based
+  const std::string without = with_line(p.text, swing_line, "(swing removed)");
+  const VerifyReport bad = verify_text(without, Dialect::Iso, "walls", m, part, p.tools, {});
+  REQUIRE_FALSE(bad.clean());
+  bool in_change = false;
+  for (const VerifyHit& h : bad.hits) in_change |= h.tool_change && h.depth_mm > 1;
+  CHECK(in_change);
+  MESSAGE("without the planner's swing: " << bad.first_problem("walls"));
+  CHECK(bad.first_problem("walls").find("tool change") != std::string::npos);
+}
+
+TEST_CASE("a tool change that plunges into the part is refused, naming the block after it") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cylinder), origin));
+  // The macro moves Z to 5 (inside the wall's height) and X into the wall's plane.
+  const Posting p = post_two_tools(swinging(5.0, std::nullopt), part, origin);
+  REQUIRE_FALSE(p.posted.refused.empty());
+  CHECK(p.posted.refused.find("tool change") != std::string::npos);
+  // One tool: no tool change, nothing refused.
+  PostOptions o;
+  o.dialect = Dialect::Iso;
+  o.part = &part;
+  const Posted one = post({{pass(cylinder, origin), "wall", 80, assembly_from_meridian(meridian(cylinder), holder())}},
+                          swinging(5.0, std::nullopt), o, "W", {});
+  CHECK(one.refused.empty());
+}
+
+TEST_CASE("machine files: tool_change takes joint values by axis name within the limits") {
+  CHECK_FALSE(shipped("xyzac-trt").tool_change.joints[2].has_value());  // default: Z to the top of its travel
+  test::ScratchDir dir("toolchange");
+  const std::string base = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/machines/xyzac-trt.yaml");
+  const std::string file = dir.file("m.yaml");
+  test::write_text(file, base + "tool_change: {Z: 400, X: -100, A: -90}\n");
+  const Machine m = load_machine(file);
+  REQUIRE(m.tool_change.joints[2].has_value());
+  CHECK(*m.tool_change.joints[2] == 400);
+  CHECK(*m.tool_change.joints[0] == -100);
+  CHECK_FALSE(m.tool_change.joints[1].has_value());
+  CHECK(*m.tool_change.joints[3] == -90);  // A is rotary[0]
+  CHECK_FALSE(m.tool_change.joints[4].has_value());
+  test::write_text(file, base + "tool_change: {Z: 500}\n");  // Z travel ends at 450
+  CHECK_THROWS_WITH_AS((void)load_machine(file), doctest::Contains("tool_change.Z"), MachineError);
+  test::write_text(file, base + "tool_change: {B: 0}\n");  // no B axis
+  CHECK_THROWS_WITH_AS((void)load_machine(file), doctest::Contains("B"), MachineError);
 }
