@@ -29,7 +29,7 @@ int run_fit(FitArgs args) {
   for (size_t k = 0; k < fit.fitted.patches.size(); ++k) {
     const pipeline::FittedPatch& p = fit.fitted.patches[k];
     fmt::print("{:<16} {:<6} {:<9} {:>10.2e} {:>10.4f} {:>8.1f}%  {}\n", p.job->name, to_string(p.job->init),
-               to_string(p.fit.fit.tool.shape), p.fit.fit.eps_opt.max, fit.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max),
+               pipeline::tool_label(fit.job, p), p.fit.fit.eps_opt.max, fit.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max),
                100 * p.fit.coverage, fmt::join(files[k], " "));
   }
   if (fit.fitted.cover) {

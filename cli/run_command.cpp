@@ -35,7 +35,7 @@ int run_job(RunArgs args) {
     std::vector<std::string> programs;
     for (const pipeline::PostedProgram& w : run.programs)
       if (w.patch == p.job->name) programs.push_back(w.file);
-    fmt::print("{:<16} {:<9} {:>10.2e} {:>9.4f} {:>9} {:<11} {}\n", p.job->name, to_string(p.fit.fit.tool.shape),
+    fmt::print("{:<16} {:<9} {:>10.2e} {:>9.4f} {:>9} {:<11} {}\n", p.job->name, pipeline::tool_label(run.fit.job, p),
                p.fit.fit.eps_opt.max, fitted.frame.length_to_mm(p.fit.fit.eps_opt.max),
                fmt::format("{:.1f}%", 100 * p.fit.coverage),
                p.collisions.clear() ? "none" : fmt::format("{} interval(s)", p.collisions.intervals.size()),

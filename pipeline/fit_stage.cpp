@@ -589,6 +589,11 @@ ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p
 
 namespace flankcam::pipeline {
 
+std::string tool_label(const Job& job, const FittedPatch& p) {
+  if (job.tool.catalogue) return job.tool.catalogue->name;
+  return std::string(to_string(p.fit.fit.tool.shape)) + (job.tool.shared ? " (shared)" : "");
+}
+
 std::string cover_summary(const Job& job, const FittedJob& f) {
   if (!f.cover) return {};
   return fmt::format("whole surface: {} patches, {:.1f}% within {} mm (stopped: {})", f.patches.size(),

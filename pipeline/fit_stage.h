@@ -70,6 +70,9 @@ struct FittedJob {
 
 // "whole surface: N patches, C% within T mm (stopped: REASON)"; empty without `patches: auto`.
 [[nodiscard]] std::string cover_summary(const Job& job, const FittedJob& fitted);
+// The patch's tool as tables name it: the catalogue name, or the fitted shape ("general",
+// "cone", ...; "shared" added when one tool serves every patch).
+[[nodiscard]] std::string tool_label(const Job& job, const FittedPatch& p);
 // The "cover" entry of report.json (`patches: auto` only).
 [[nodiscard]] nlohmann::ordered_json cover_report(const Job& job, const FittedJob& fitted);
 // `patches: auto`: the job with the detected patches written out as `init: lines` (detected-job.yaml).

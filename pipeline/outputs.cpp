@@ -274,7 +274,7 @@ std::vector<std::vector<std::string>> write_run(const RunResult& run, OutputDir&
 
     const std::string collisions = p.collisions.clear() ? "none" : fmt::format("{} interval(s)", p.collisions.intervals.size());
     const std::string coverage = fmt::format("{:.1f}%", 100 * p.fit.coverage);
-    html.rows.push_back({name, to_string(p.fit.fit.tool.shape), fmt::format("{:.2e}", p.fit.fit.eps_opt.max),
+    html.rows.push_back({name, tool_label(job, p), fmt::format("{:.2e}", p.fit.fit.eps_opt.max),
                          fmt::format("{:.4f}", eps_mm), coverage, collisions,
                          patch_programs.empty() ? "none" : fmt::format("{}", fmt::join(patch_programs, " "))});
     HtmlSection section;
