@@ -4,6 +4,7 @@
 
 #include "core/errors.h"
 #include "pipeline/job.h"
+#include "tests/pipeline/job_error.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -15,12 +16,7 @@ const char* patch = "patches:\n  - name: p\n    init: line\n    line: [0, 0, 0, 
 std::string error_of(const test::ScratchDir& dir, const std::string& first) {
   test::write_text(dir.file("s.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
   test::write_text(dir.file("job.yaml"), first + "\nsurface: s.obj\n" + patch);
-  try {
-    (void)pipeline::read_job(dir.file("job.yaml"));
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "(accepted)";
+  return test::job_error(dir.file("job.yaml"));
 }
 }  // namespace
 

@@ -16,6 +16,7 @@
 #include "pipeline/tool_catalogue.h"
 #include "postproc/gcode.h"
 #include "postproc/tool_export.h"
+#include "tests/pipeline/job_error.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -58,12 +59,7 @@ int count_m6(const std::string& text) {
 }
 std::string error_of(const test::ScratchDir& dir, const std::string& yaml) {
   test::write_text(dir.file("job.yaml"), yaml);
-  try {
-    (void)pipeline::read_job(dir.file("job.yaml"));
-  } catch (const InputError& e) {
-    return e.what();
-  }
-  return "(accepted)";
+  return test::job_error(dir.file("job.yaml"));
 }
 }  // namespace
 

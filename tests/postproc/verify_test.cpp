@@ -10,6 +10,7 @@
 #include "kinematics/machine.h"
 #include "postproc/gcode.h"
 #include "postproc/nc_program.h"
+#include "tests/postproc/wall.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -18,24 +19,8 @@ namespace {
 
 Machine shipped(const std::string& name) { return load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/" + name + ".yaml"); }
 
-// A wall x = r(z) (y in [-40, 40], z in [0, 20]): the envelope of a tool with meridian r standing at
-// x = 0 with a vertical axis, tip at z = 0, moving along y. Triangles face +x... either way.
-TriMesh wall(const std::function<double(double)>& r) {
-  TriMesh m;
-  const int ny = 80, nz = 40;
-  for (int j = 0; j <= nz; ++j)
-    for (int i = 0; i <= ny; ++i) {
-      const double z = 20.0 * j / nz, y = -40 + 80.0 * i / ny;
-      m.vertices.emplace_back(r(z), y, z);
-    }
-  for (int j = 0; j < nz; ++j)
-    for (int i = 0; i < ny; ++i) {
-      const int a = j * (ny + 1) + i, b = a + 1, c = a + ny + 1, d = c + 1;
-      m.faces.push_back({a, b, d});
-      m.faces.push_back({a, d, c});
-    }
-  return m;
-}
+// The wall of a tool with meridian r moving along y (y in [-40, 40]).
+TriMesh wall(const std::function<double(double)>& r) { return test::flank_wall(r, 40, 80, 40); }
 
 std::vector<Eigen::Vector2d> meridian(const std::function<double(double)>& r) {
   std::vector<Eigen::Vector2d> out;

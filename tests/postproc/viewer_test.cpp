@@ -12,6 +12,7 @@
 #include "kinematics/machine.h"
 #include "postproc/apt.h"
 #include "postproc/verify_view.h"
+#include "tests/postproc/wall.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -333,19 +334,7 @@ namespace {
 
 double cone_r(double z) { return 3 + 0.1 * z; }
 
-TriMesh cone_wall() {
-  TriMesh m;
-  const int ny = 60, nz = 20;
-  for (int j = 0; j <= nz; ++j)
-    for (int i = 0; i <= ny; ++i) m.vertices.emplace_back(cone_r(20.0 * j / nz), -30 + 60.0 * i / ny, 20.0 * j / nz);
-  for (int j = 0; j < nz; ++j)
-    for (int i = 0; i < ny; ++i) {
-      const int a = j * (ny + 1) + i, b = a + 1, c = a + ny + 1, d = c + 1;
-      m.faces.push_back({a, b, d});
-      m.faces.push_back({a, d, c});
-    }
-  return m;
-}
+TriMesh cone_wall() { return test::flank_wall(cone_r, 30, 60, 20); }
 
 VerifyTool cone_tool() {
   VerifyTool t;
