@@ -29,6 +29,7 @@ void write_text(OutputDir& out, const std::string& name, const std::string& text
 struct PatchOutputs {
   const ClProgram* program = nullptr;  // CL-data (none for a colliding patch unless collisions are allowed)
   bool apt = true, cl = true, tool = true;
+  const ClProgram* apt_program = nullptr;  // NAME.apt when it differs from `program` (every pass of the patch)
 };
 
 std::vector<std::string> write_patch_files(OutputDir& out, const Job& job, const FittedJob& f, const FittedPatch& p,
@@ -69,7 +70,8 @@ std::vector<std::string> write_patch_files(OutputDir& out, const Job& job, const
     }
   }
   if (what.program) {
-    if (what.apt) write_apt(out.file(name + ".apt"), *what.program), files.push_back(name + ".apt");
+    if (what.apt)
+      write_apt(out.file(name + ".apt"), what.apt_program ? *what.apt_program : *what.program), files.push_back(name + ".apt");
     if (what.cl) {
       write_file_atomically(out.file(name + "-cl.csv"), [&](std::ostream& o) { o << cl_csv(*what.program); });
       files.push_back(name + "-cl.csv");
@@ -233,7 +235,9 @@ std::vector<std::vector<std::string>> write_run(const RunResult& run, OutputDir&
     const auto& cl = run.fit.cl_data[k];
     const bool allowed = cl.has_value();
     std::vector<std::string> files =
-        write_patch_files(out, job, fitted, p, {allowed ? &*cl : nullptr, job.post.apt, job.post.cl, job.post.tool});
+        write_patch_files(out, job, fitted, p,
+                          {allowed ? &*cl : nullptr, job.post.apt, job.post.cl, job.post.tool,
+                           k < run.posted_cl.size() && run.posted_cl[k] ? &*run.posted_cl[k] : nullptr});
     std::vector<std::string> patch_programs;
     nlohmann::ordered_json program_entries = nlohmann::ordered_json::array();
     const PostedProgram* chart = nullptr;

@@ -37,6 +37,20 @@ void plan_fit_files(const std::string& name, bool tool, bool apt, bool cl, Outpu
   if (cl) plan.add(name + "-cl.csv", owner);
 }
 
+// The passes of a patch as one CL program: each pass's moves in order, each pass entered by a rapid
+// (so no feed motion joins one pass to the next).
+ClProgram all_passes(const std::vector<ClProgram>& passes) {
+  ClProgram all = passes.back();
+  if (passes.size() == 1) return all;
+  all.moves.clear();
+  for (const ClProgram& pass : passes)
+    for (size_t i = 0; i < pass.moves.size(); ++i) {
+      all.moves.push_back(pass.moves[i]);
+      if (i == 0) all.moves.back().rapid = true;
+    }
+  return all;
+}
+
 void check_options(const RunOptions& o) {
   if (auto err = o.validate(); !err.empty()) throw InputError(err);
 }
@@ -229,6 +243,8 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     std::vector<ClProgram> sections;
     for (const PassMotion& pm : p.earlier_passes) sections.push_back(pass_program(j, r.fit.fitted, p, pm, r.fit.cl_data[k]->tool));
     sections.push_back(*r.fit.cl_data[k]);
+    r.posted_cl.resize(r.fit.fitted.patches.size());
+    r.posted_cl[k] = all_passes(sections);
     for (ClProgram& work : sections) {
       for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
       inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back(), assembly});

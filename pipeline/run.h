@@ -81,6 +81,9 @@ struct RunResult {
   std::vector<PostedProgram> programs;
   std::vector<double> tool_length_mm;  // per patch, spindle nose to tip
   std::optional<SetupDecision> setup;   // post.setup: auto (the job's post.setup_rotate_deg is the chosen one)
+  // Per patch with a program: the CL-data it was posted from, every pass in order (part coordinates),
+  // as NAME.apt holds it; without passes the fit's CL-data.
+  std::vector<std::optional<ClProgram>> posted_cl;
 };
 
 // The name of the program that runs all patches of `flankcam run` in order.

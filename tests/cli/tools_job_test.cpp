@@ -75,3 +75,31 @@ TEST_CASE("flankcam run of examples/blade/job-catalogue.yaml: the catalogue tape
   }
   CHECK(count(test::read_text(dir.file("out/all-patches.nc")), "M6") == 1);
 }
+
+TEST_CASE("passes: NAME.apt holds every pass in order, and flankcam verify finds the program on its CL-data") {
+  // The program cuts the 0.3 mm pass and then the final one; verify compares every cutting block with
+  // NAME.apt, so the APT must hold both (it held the last pass only: 101 blocks "off the CL-data").
+  test::ScratchDir dir("passes-verify");
+  std::string job = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/job-1-patch.yaml");
+  job.replace(job.find("surface: blade.obj"), 18, "surface: " + std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj");
+  job.replace(job.find("post: {dialects: [iso, heidenhain]}"), 35, "post: {dialects: [iso]}");
+  job += "passes: [{allowance: 0.3}, {allowance: 0}]\n";
+  test::write_text(dir.file("job.yaml"), job);
+  const test::RunResult r = test::run_flankcam("run " + dir.file("job.yaml") + " --quiet --out " + dir.file("out"), dir);
+  CAPTURE(r.err);
+  REQUIRE(r.code == 0);
+  const std::string apt = test::read_text(dir.file("out/blade.apt"));
+  const std::string program = test::read_text(dir.file("out/blade.nc"));
+  // Two passes: twice the moves of the last pass's CL CSV (a line a move after two header lines).
+  const int csv_poses = count(test::read_text(dir.file("out/blade-cl.csv")), "\n") - 2;
+  CHECK(count(apt, "GOTO/") >= 2 * csv_poses);
+  const test::RunResult v = test::run_flankcam(
+      "verify --job " + dir.file("job.yaml") + " " + dir.file("out/blade.nc") + " --out " + dir.file("verify"), dir);
+  CAPTURE(v.err);
+  CHECK(v.code == 0);
+  const nlohmann::json report = nlohmann::json::parse(test::read_text(dir.file("verify/verify.json")));
+  const nlohmann::json& cl = report["programs"][0]["cl_data"];
+  CHECK(cl["off_cl_data"].empty());
+  CHECK(int(cl["feed_blocks_compared"]) > 2 * csv_poses * 9 / 10);  // both passes compared
+  CHECK(count(program, "M6") == 1);
+}
