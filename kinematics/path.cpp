@@ -354,6 +354,13 @@ ToolPose programmed_pose(const Machine& m, const Joints& programmed, double tool
   return {programmed.linear, fk.axis};
 }
 
+BlockTurn block_turn(const JointPath& path, size_t i) {
+  const Eigen::Vector3d &a = path.poses[i - 1].axis, &b = path.poses[i].axis;
+  return {std::abs(path.joints[i].rotary[0] - path.joints[i - 1].rotary[0]) +
+              std::abs(path.joints[i].rotary[1] - path.joints[i - 1].rotary[1]),
+          std::atan2(a.cross(b).norm(), a.dot(b)) * 180 / M_PI};
+}
+
 std::vector<SingularStretch> singular_stretches(const JointPath& path, double ratio, double min_rotary_deg) {
   std::vector<SingularStretch> out;
   SingularStretch cur;
@@ -363,10 +370,7 @@ std::vector<SingularStretch> singular_stretches(const JointPath& path, double ra
     open = false;
   };
   for (size_t i = 1; i < path.joints.size(); ++i) {
-    const double rot = std::abs(path.joints[i].rotary[0] - path.joints[i - 1].rotary[0]) +
-                       std::abs(path.joints[i].rotary[1] - path.joints[i - 1].rotary[1]);
-    const Eigen::Vector3d &a = path.poses[i - 1].axis, &b = path.poses[i].axis;
-    const double turn = std::atan2(a.cross(b).norm(), a.dot(b)) * 180 / M_PI;
+    const auto [rot, turn] = block_turn(path, i);
     if (rot > 1e-6 && rot > ratio * turn) {
       if (!open) cur = {int(i) - 1, int(i), 0, 0}, open = true;
       cur.last_pose = int(i);

@@ -61,6 +61,11 @@ struct SingularStretch {
   double rotary_deg = 0;      // |dR1| + |dR2| summed over the stretch
   double axis_turn_deg = 0;   // the tool axis' turn over the stretch (summed per block)
 };
+// Block i of a path (i >= 1): the rotary travel |dR1| + |dR2| and the tool axis' turn, degrees.
+struct BlockTurn {
+  double rotary_deg = 0, axis_turn_deg = 0;
+};
+[[nodiscard]] BlockTurn block_turn(const JointPath& path, size_t i);
 // Blocks whose rotary travel exceeds `ratio` degrees per degree of axis turn, merged into stretches,
 // kept when they travel at least `min_rotary_deg`.
 [[nodiscard]] std::vector<SingularStretch> singular_stretches(const JointPath& path, double ratio = 5,

@@ -237,7 +237,7 @@ std::vector<std::vector<std::string>> write_run(const RunResult& run, OutputDir&
     std::vector<std::string> files =
         write_patch_files(out, job, fitted, p,
                           {allowed ? &*cl : nullptr, job.post.apt, job.post.cl, job.post.tool,
-                           k < run.posted_cl.size() && run.posted_cl[k] ? &*run.posted_cl[k] : nullptr});
+                           run.posted_cl[k] ? &*run.posted_cl[k] : nullptr});
     std::vector<std::string> patch_programs;
     nlohmann::ordered_json program_entries = nlohmann::ordered_json::array();
     const PostedProgram* chart = nullptr;

@@ -162,10 +162,7 @@ SetupCandidate evaluate_setup(const Job& job, const Machine& m, const std::vecto
     for (size_t j = 0; j < path.poses.size(); ++j) {
       c.min_singular_deg = std::min(c.min_singular_deg, singularity_angle_deg(m, path.poses[j].axis));
       if (j == 0) continue;
-      const double rot = std::abs(path.joints[j].rotary[0] - path.joints[j - 1].rotary[0]) +
-                         std::abs(path.joints[j].rotary[1] - path.joints[j - 1].rotary[1]);
-      const double turn = std::atan2(path.poses[j].axis.cross(path.poses[j - 1].axis).norm(),
-                                     path.poses[j].axis.dot(path.poses[j - 1].axis)) * 180 / M_PI;
+      const auto [rot, turn] = block_turn(path, j);
       if (rot >= 0.1) c.max_rotary_per_deg = std::max(c.max_rotary_per_deg, rot / std::max(turn, 1e-3));
     }
   }
@@ -233,6 +230,7 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
   // Kinematics and programs for every patch allowed to run, all solved before any file is written:
   // an unreachable pose ends the run with nothing half done.
   std::vector<PostInput> inputs;  // work coordinates
+  r.posted_cl.resize(r.fit.fitted.patches.size());
   for (size_t k = 0; k < r.fit.fitted.patches.size(); ++k) {
     const FittedPatch& p = r.fit.fitted.patches[k];
     r.tool_length_mm.push_back(tool_length(j, p));
@@ -243,7 +241,6 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     std::vector<ClProgram> sections;
     for (const PassMotion& pm : p.earlier_passes) sections.push_back(pass_program(j, r.fit.fitted, p, pm, r.fit.cl_data[k]->tool));
     sections.push_back(*r.fit.cl_data[k]);
-    r.posted_cl.resize(r.fit.fitted.patches.size());
     r.posted_cl[k] = all_passes(sections);
     for (ClProgram& work : sections) {
       for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
