@@ -3,6 +3,7 @@
 #include <ceres/ceres.h>
 
 #include <Eigen/Dense>
+#include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <numeric>
@@ -380,9 +381,11 @@ ConstraintRows constraint_rows(const ToolRadius& tool, double L, const ToolConst
   // Slope bound k >= |d'(z)| = |d_s| / L of the result: the cone angle's sine, and where radii r =
   // d sqrt(1 - k^2) are bounded below, also the current slope (+5%) so that d >= r_min / sqrt(1 - k^2)
   // is a sufficient bound, and small enough that this lower bound stays below max_radius.
+  // A given max_cone_angle is that bound; without one the current slope is (so a tool that must taper
+  // to stay out of a check surface needs max_cone_angle).
   double k = std::sin(c.max_cone_angle_rad);
   const bool lower = c.min_radius > 0 || c.min_tip_radius > 0;
-  if (lower) {
+  if (lower && !(c.max_cone_angle_rad < M_PI / 2)) {
     const double now = Q.rows() > 0 ? (Q * D).cwiseAbs().maxCoeff() / L : 0.0;
     k = std::min({k, std::max(1.05 * now, 0.02), 0.99});
     if (std::isfinite(c.max_radius)) {
@@ -525,6 +528,123 @@ ToolRadius shared_radii(const std::vector<const SurfaceIndex*>& surfaces, const 
 
 
 namespace {
+// One sample of a check surface (CheckSurface): the axis point at (t_i, s) and its radius R plus
+// the allowance (cutter: d(s) - tolerance with the radius basis, body: constant + clearance).
+struct CheckSample {
+  int i = 0;
+  double s = 0;
+  int j = -1;            // cutter sphere: sample index (radius d_j); -1: a rim point or the body
+  double offset = 0;     // R = offset (+ d(s) for a cutter sphere)
+  Eigen::Vector3d shift = Eigen::Vector3d::Zero();  // rim points: from the axis point to the rim
+  double reach = 0;      // rim and body: their radius (how far the axis is from the sample's surface)
+  bool body = false;     // shank or holder
+};
+
+// The samples of every row. The cutter has flat ends (the canal surface cut off at the tip and at
+// the shoulder): its spheres that fit between the ends, and rims of 12 points near both ends; then
+// the body (shank, holder) beyond the holder-side end.
+std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, const CheckSurface& c, int m, int n) {
+  std::vector<CheckSample> out;
+  bool body_at_b = true;
+  if (c.up) {
+    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+    for (int i = 0; i <= 20; ++i) mean += (r.b.point(i / 20.0) - r.a.point(i / 20.0)).normalized();
+    body_at_b = mean.dot(*c.up) >= 0;
+  }
+  const double L = std::max(r.length, 1e-12);
+  // Rims at the tip and at half and one tip radius above it, and at half and one radius below the
+  // shoulder (not at the shoulder itself, where a rim would sit on the edge where the part's top
+  // face meets Φ's top boundary; the shank's samples start there).
+  std::vector<double> rim_s;
+  const double d_a = tool.d(body_at_b ? 0.0 : 1.0), d_b = tool.d(body_at_b ? 1.0 : 0.0);
+  for (const double f : {0.0, 0.5, 1.0}) rim_s.push_back(std::min(f * d_a / L, 0.5));
+  for (const double f : {0.5, 1.0}) rim_s.push_back(std::max(1 - f * d_b / L, 0.5));
+  if (!body_at_b)
+    for (double& x : rim_s) x = 1 - x;
+  constexpr int kRim = 12;
+  for (int i = 0; i < m; ++i) {
+    const double t = double(i) / (m - 1);
+    for (int j = 0; j < n; ++j) {
+      const double sj = double(j) / (n - 1), d = tool.d(sj);
+      if (sj * L >= d && (1 - sj) * L >= d) out.push_back({i, sj, j, -c.tolerance, Eigen::Vector3d::Zero(), d});
+    }
+    const Eigen::Vector3d axis = (r.b.point(t) - r.a.point(t)).normalized();
+    const Eigen::Vector3d u = axis.unitOrthogonal(), v = axis.cross(u);
+    for (const double sr : rim_s)
+      for (int k = 0; k < kRim; ++k) {
+        const double th = 2 * M_PI * k / kRim;
+        out.push_back({i, sr, -1, -c.tolerance, tool.d(sr) * (std::cos(th) * u + std::sin(th) * v), tool.d(sr)});
+      }
+    for (const Eigen::Vector2d& b : c.body)
+      out.push_back({i, body_at_b ? 1 + b.x() / L : -b.x() / L, -1, b.y() + c.clearance, Eigen::Vector3d::Zero(), b.y(), true});
+  }
+  return out;
+}
+
+// The signed distance of p to the check part (faces out of the material) and its gradient g.
+struct CheckDistance {
+  double distance = INFINITY;
+  Eigen::Vector3d g = Eigen::Vector3d::Zero(), q = Eigen::Vector3d::Zero();
+};
+CheckDistance check_distance(const SurfaceIndex& part, const Eigen::Vector3d& p, const Footpoint& f, const Footpoint* whole,
+                             const SurfaceIndex* solid, double tolerance) {
+  CheckDistance out;
+  if (f.face < 0 || !std::isfinite(f.distance)) return out;
+  const Eigen::Vector3d nf = face_normal(part.mesh(), f.face);
+  const Eigen::Vector3d v = p - f.point;
+  double sign = 1;
+  if (solid && whole && whole->face >= 0) {
+    // Inside is decided by the whole part (closed, with Φ's twin): more than the tolerance inside it.
+    sign = (p - whole->point).dot(face_normal(solid->mesh(), whole->face)) < -tolerance ? -1.0 : 1.0;
+  } else {
+    // The sign is that of the closest face's normal, except at the part's boundary (where a
+    // point in front of a hole is outside though the face normal next to its edge may say otherwise).
+    sign = !f.on_boundary && v.dot(nf) < 0 ? -1.0 : 1.0;
+  }
+  out.q = f.point;
+  out.distance = sign * f.distance;
+  out.g = f.distance > 1e-12 ? Eigen::Vector3d(sign * v / f.distance) : nf;
+  return out;
+}
+
+// Footpoints of the check samples of one motion on the part.
+std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c, const std::vector<CheckSample>& samples,
+                                           int m) {
+  std::vector<Eigen::Vector3d> pts;
+  pts.reserve(samples.size());
+  for (const CheckSample& cs : samples) pts.push_back(r.point(double(cs.i) / (m - 1), cs.s) + cs.shift);
+  const std::vector<Footpoint> fps = c.part->closest(pts);
+  std::vector<Footpoint> whole;
+  if (c.solid) whole = c.solid->closest(pts);
+  std::vector<CheckDistance> out(samples.size());
+  for (size_t k = 0; k < samples.size(); ++k)
+    out[k] = check_distance(*c.part, pts[k], fps[k], c.solid ? &whole[k] : nullptr, c.solid, c.tolerance);
+  return out;
+}
+}  // namespace
+
+CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const CheckSurface& c, int rows, int samples_s) {
+  CheckProfile out;
+  out.intrusion.assign(size_t(rows), -INFINITY);
+  out.body.assign(size_t(rows), 0);
+  out.at.assign(size_t(rows), Eigen::Vector3d::Zero());
+  if (!c.part || rows < 2) return out;
+  const std::vector<CheckSample> samples = check_samples(rails, tool, c, rows, samples_s);
+  const std::vector<CheckDistance> dist = check_distances(rails, c, samples, rows);
+  for (size_t k = 0; k < samples.size(); ++k) {
+    const CheckSample& cs = samples[k];
+    const double R = cs.offset + (cs.j >= 0 ? tool.d(cs.s) : 0.0);
+    const double v = R - dist[k].distance;
+    if (v > out.intrusion[size_t(cs.i)]) {
+      out.intrusion[size_t(cs.i)] = v;
+      out.body[size_t(cs.i)] = cs.body;
+      out.at[size_t(cs.i)] = dist[k].q;
+    }
+  }
+  return out;
+}
+
+namespace {
 // A fit in progress: one or several motions (patches) sharing one tool.
 struct Joint {
   std::vector<Rails> rails;
@@ -620,6 +740,32 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
             const Eigen::Vector3d rhs = o.fair_update ? start : Eigen::Vector3d::Zero();
             problem.AddResidualBlock(new LinearResidual(std::move(J), rhs), nullptr, blocks);
           }
+        }
+      }
+      // Check surfaces: one-sided penalties keep the cutter and its body out of the part.
+      if (o.check.part) {
+        const std::vector<CheckSample> samples = check_samples(rails, st.tool, o.check, m, n);
+        const std::vector<CheckDistance> dist = check_distances(rails, o.check, samples, m);
+        const double w = w_plane * o.check.weight;
+        for (size_t k = 0; k < samples.size(); ++k) {
+          const CheckSample& cs = samples[k];
+          const double R = cs.offset + (cs.j >= 0 ? st.tool.d(cs.s) : 0.0);
+          // Beyond the band: clear. An axis point inside the part (or nearly): the motion is not
+          // near a clear one there, the linearisation means nothing, and trimming decides instead.
+          const double reach = cs.j >= 0 ? st.tool.d(cs.s) : cs.reach;
+          if (!(dist[k].distance < R + o.check.band) || !(R - dist[k].distance < o.check.depth_limit * reach)) continue;
+          const BasisRow& row = rows[size_t(cs.i)];
+          std::vector<double*> blocks;
+          for (int q = 0; q < 4; ++q) blocks.push_back(&A[size_t(3 * (row.first + q))]);
+          for (int q = 0; q < 4; ++q) blocks.push_back(&B[size_t(3 * (row.first + q))]);
+          std::vector<double> c;
+          if (cs.j >= 0) {
+            c = tool_basis[size_t(cs.j)];
+            blocks.push_back(D.data());
+          }
+          problem.AddResidualBlock(new fit_residuals::CheckResidual(row, cs.s, dist[k].q - cs.shift, dist[k].g, std::move(c),
+                                                                    cs.offset, w),
+                                   nullptr, blocks);
         }
       }
     }  // patches

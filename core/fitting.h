@@ -47,6 +47,38 @@ struct ToolRadius {
   [[nodiscard]] RadiusProfile profile() const;  // the same d(s) as a cubic B-spline
 };
 
+// Check surfaces (the part, without the design surface's own region): a fitted tool stays out of
+// them. Unit frame. Every round, samples of the tool's axis are queried against the part: along the
+// cutter (the fit's m x n samples, radius d_j) and along the body beyond it (shank and holder:
+// `body` gives (distance beyond the cutter's end along the axis, radius) of each sample). A sample
+// whose signed distance to the part is below its radius minus `tolerance` (cutter) or plus
+// `clearance` (body) gets a one-sided penalty on the motion and the radii,
+//   r = w (R - <p - q, g>),  q the part's closest point, g its outward direction,
+// the same linearisation as eq. (10)'s plane term, so the optimisation tilts or shifts the axis (and
+// narrows the radii) away from the part instead of cutting it.
+struct CheckSurface {
+  // Unset: no check surface. Its faces must be oriented out of the material (a closed part outward):
+  // the sign of a distance is that of <p - q, face normal>, and positive (outside) where the closest
+  // point lies on the part's boundary (the edge of the hole where Φ's twin was cut out).
+  const SurfaceIndex* part = nullptr;
+  // The whole part (closed, Φ's twin included), when `part` is it without the twin: a point is
+  // inside when it lies more than `tolerance` inside this one (the sign of its closest face), which
+  // stays right in front of the hole the twin leaves in `part`. Unset: `part`'s own faces decide.
+  const SurfaceIndex* solid = nullptr;
+  double tolerance = 0;   // how deep the cutter may enter the part
+  double clearance = 0;   // how far shank and holder stay from it
+  std::vector<Eigen::Vector2d> body;  // (u beyond the cutter end, radius), u > 0 increasing
+  // The tool's holder side: the end of the axis segment whose direction from the other end points
+  // along `up` (mean over the motion). Unset: the b end (s = 1), the tip is a.
+  std::optional<Eigen::Vector3d> up;
+  double weight = 3;      // per unit of intrusion, relative to the plane term's weight
+  // Samples farther from the part than their radius plus this are left out of a round, and so are
+  // those more than this share of their radius inside it (the tool deep in the part: no nearby
+  // motion is clear, the motion is trimmed there instead).
+  double band = 0.05;
+  double depth_limit = 0.5;
+};
+
 struct FitOptions {
   int samples_s = 30, samples_t = 100;                            // n x m samples of R(t, s) (paper: 30 x 100)
   double w_plane = 1, w_fair = 0.1, w_point = 0.001, w_rigid = 0.1;  // μ1..μ4 of eq. (12)
@@ -74,6 +106,7 @@ struct FitOptions {
   // while coverage rose from 61% to 62% (72%). 0: plain least squares, as in the paper.
   double robust_scale = 0;
   ToolConstraints constraints;       // custom tools (not with fixed_tool)
+  CheckSurface check;                // the part the tool must keep out of (none by default)
   // A tool from a catalogue (or shared by several patches): its radii are held constant and only
   // the motion is fitted (the paper's optimisation without d as unknowns). Its shape replaces `shape`.
   std::optional<ToolRadius> fixed_tool;
@@ -93,6 +126,17 @@ struct Rails {
   [[nodiscard]] Eigen::Vector3d point(double t, double s) const { return (1 - s) * a.point(t) + s * b.point(t); }
 };
 [[nodiscard]] LineMotion to_motion(const Rails& r);
+
+// The tool's intrusion into the check surface per motion row: rows[i] over t_i = i / (rows - 1) is
+// the worst (R_eff - signed distance) over the cutter and body samples of that row (<= 0: clear),
+// and `body` says whether that worst sample belongs to the shank or holder (else the cutter).
+struct CheckProfile {
+  std::vector<double> intrusion;
+  std::vector<char> body;
+  std::vector<Eigen::Vector3d> at;  // the part point there
+};
+[[nodiscard]] CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const CheckSurface& check,
+                                         int rows, int samples_s);
 
 // A finite line [a, b] (unit frame).
 struct AxisLine {

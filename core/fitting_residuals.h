@@ -138,6 +138,48 @@ class HingeResidual final : public ceres::CostFunction {
   double w_;
 };
 
+// A check-surface sample (FitOptions::check): the axis point p = (1-s) a(t_i) + s b(t_i) (s outside
+// [0, 1] on the shank and holder) must keep its signed distance <p - q, g> to the part (footpoint
+// q, outward direction g, fixed within a solve) at least R, where R = d_j - tolerance for the cutter
+// (c: d's basis at s, radius parameters as a 9th block) or a constant (c empty: shank, holder plus
+// the clearance). One-sided: r = w max(0, R - <p - q, g>), zero and flat where it holds.
+class CheckResidual final : public ceres::CostFunction {
+ public:
+  CheckResidual(const BasisRow& row, double s, const Eigen::Vector3d& q, const Eigen::Vector3d& g, std::vector<double> c,
+                double offset, double w)
+      : row_(row), s_(s), q_(q), g_(g), c_(std::move(c)), offset_(offset), w_(w) {
+    set_num_residuals(1);
+    for (int k = 0; k < 8; ++k) mutable_parameter_block_sizes()->push_back(3);
+    if (!c_.empty()) mutable_parameter_block_sizes()->push_back(int(c_.size()));
+  }
+  bool Evaluate(double const* const* x, double* r, double** J) const override {
+    Eigen::Vector3d p = Eigen::Vector3d::Zero();
+    for (int k = 0; k < 4; ++k)
+      p += row_.w[k] * ((1 - s_) * Eigen::Map<const Eigen::Vector3d>(x[k]) + s_ * Eigen::Map<const Eigen::Vector3d>(x[4 + k]));
+    double R = offset_;
+    for (size_t k = 0; k < c_.size(); ++k) R += c_[k] * x[8][k];
+    const double v = R - (p - q_).dot(g_);
+    const bool on = v > 0;
+    r[0] = on ? w_ * v : 0.0;
+    if (!J) return true;
+    for (int k = 0; k < 8; ++k) {
+      if (!J[k]) continue;
+      const double f = row_.w[k % 4] * (k < 4 ? 1 - s_ : s_);
+      Eigen::Map<Eigen::RowVector3d>{J[k]} = on ? Eigen::RowVector3d(-w_ * f * g_.transpose()) : Eigen::RowVector3d::Zero();
+    }
+    if (!c_.empty() && J[8])
+      for (size_t k = 0; k < c_.size(); ++k) J[8][k] = on ? w_ * c_[k] : 0.0;
+    return true;
+  }
+
+ private:
+  BasisRow row_;
+  double s_;
+  Eigen::Vector3d q_, g_;
+  std::vector<double> c_;
+  double offset_, w_;
+};
+
 // A solve whose result cannot be used: Ceres' FAILURE or USER_FAILURE, or a cost that is not
 // finite. NO_CONVERGENCE only means the solve used its iteration budget.
 inline bool solve_failed(const ceres::Solver::Summary& s) {

@@ -35,6 +35,8 @@ struct PatchOptions {
   // by more than `tolerance`): an overcut cannot be repaired, an undercut can by a neighbour.
   // Detection always trims; off by default here so hand-placed jobs keep their motion.
   bool trim_gouges = false;
+  // With a check surface (fit.check) the motion is always trimmed to the longest stretch where the
+  // tool keeps out of the part (cutter within fit.check.tolerance, body outside the clearance).
   // Stage messages ("exploring the line", ...) for progress output; may be empty.
   std::function<void(const std::string&)> on_stage;
 };
@@ -47,6 +49,18 @@ struct PatchFit {
   double seconds_init = 0, seconds_opt = 0;  // wall clock
   double t_from = 0, t_to = 1;              // the part of the optimised motion kept (trim_gouges)
   bool gouges = false;                      // Ω still lies below Φ beyond the tolerance somewhere
+  // With a check surface (PatchOptions::fit.check): why the motion was trimmed (the worst intrusion
+  // of the optimised motion, before trimming), the worst intrusion left (<= 0: clear; unit frame,
+  // beyond the tolerance for the cutter, inside the clearance for shank and holder), and whether
+  // no stretch of the motion could be kept clear (the patch is then left untrimmed and refused).
+  struct CheckTrim {
+    bool body = false;                 // shank or holder (else the cutter)
+    double intrusion = 0;              // unit frame
+    Eigen::Vector3d at = Eigen::Vector3d::Zero();  // the part point, unit frame
+  };
+  std::optional<CheckTrim> check_trim;
+  double check_intrusion = -INFINITY;
+  bool check_refused = false;
   std::optional<ExploredLine> explored;     // line-driven only
   std::optional<LineTrajectory> trajectory;  // line-driven only
 };
@@ -58,6 +72,14 @@ struct PatchFit {
 // The machined surface of `fit.fit`, then (with trim_gouges) the rails trimmed in t to the longest
 // run of envelope rows that do not gouge Φ beyond the tolerance, and the coverage. Used by fit_patch.
 [[nodiscard]] PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit fit, const PatchOptions& options);
+
+// The check surface (options.fit.check) applied to a fit made without it: when its tool enters the
+// part, two ways out are compared, the motion trimmed to its clear stretch and the motion refitted
+// with the part's penalties (from the fitted rails) and then trimmed; the clear one covering more
+// of Φ wins (neither clear: the one intruding least, `check_refused`). Without a check surface, or
+// when the fit is clear already, it is only machined and measured. fit_patch fits this way, and
+// `patches: auto` applies it to every detected patch.
+[[nodiscard]] PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOptions& options);
 
 // The rails restricted to [t0, t1], reparametrised to [0, 1] (same control point count).
 [[nodiscard]] Rails trimmed(const Rails& rails, double t0, double t1);

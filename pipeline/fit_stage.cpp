@@ -4,10 +4,12 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <memory>
 #include <optional>
 
+#include "core/check_surface.h"
 #include "core/detect.h"
 #include "core/errors.h"
 #include "core/number_format.h"
@@ -30,6 +32,35 @@ PatchSpec unit_spec(const PatchJob& p, const Similarity& frame) {
   s.length = p.length_mm > 0 ? frame.length_to_unit(p.length_mm) : 0;
   for (const auto& l : p.lines_mm) s.lines.push_back({frame.to_unit(point(l, 0)), frame.to_unit(point(l, 1))});
   return s;
+}
+
+// Shank and holder beyond the cutter as check-surface samples (u beyond the cutter's end, radius), unit
+// frame: about every half of the smallest radius along their length, at most 64.
+std::vector<Eigen::Vector2d> body_samples(const HolderJob& h, const Similarity& fr) {
+  struct Piece {
+    double length, r0, r1;
+  };
+  const std::vector<Piece> pieces{{h.shank_length, h.shank_diameter / 2, h.shank_diameter / 2},
+                                  {h.length, h.diameter / 2, h.diameter_far / 2},
+                                  {h.cylinder_length, h.diameter_far / 2, h.diameter_far / 2}};
+  double total = 0, r_min = INFINITY;
+  for (const Piece& p : pieces)
+    if (p.length > 0) total += p.length, r_min = std::min({r_min, p.r0, p.r1});
+  std::vector<Eigen::Vector2d> out;
+  if (!(total > 0)) return out;
+  const double step = std::max(0.5 * r_min, total / 64);
+  double start = 0;
+  for (const Piece& p : pieces) {
+    if (!(p.length > 0)) continue;
+    const int k = std::max(1, int(std::ceil(p.length / step)));
+    for (int i = 0; i <= k; ++i) {
+      const double f = double(i) / k;
+      if (i == 0 && !out.empty()) continue;  // shared with the previous piece's end
+      out.emplace_back(fr.length_to_unit(start + f * p.length), fr.length_to_unit(p.r0 + f * (p.r1 - p.r0)));
+    }
+    start += p.length;
+  }
+  return out;
 }
 
 // The tool's meridian (z, r) in mm from the tip.
@@ -111,21 +142,32 @@ std::vector<ToolPose> poses_mm(const Job& job, const Similarity& frame, const Ra
 }  // namespace
 
 void check_job(const Job& job, FittedJob& f, const Progress& progress) {
-  const std::optional<LoadedMesh> separate = load_job_part(job);
-  const TriMesh& part = separate ? separate->mesh : f.surface.mesh;
-  progress(fmt::format("collision checks against {} ({} triangles), clearance {} mm", job.part.string(), part.faces.size(),
-                       job.clearance_mm));
   // The design surface in mm: contact points; it is the part too unless a separate one is given.
+  // With a separate part the part's own twin of the design surface is left out (fit_job) and the
+  // design surface is checked instead, with the fitted tolerance; the rest with check_tolerance.
   const SurfaceIndex design(f.surface.mesh);
-  std::optional<SurfaceIndex> separate_index;
-  if (separate) {
-    separate_index.emplace(separate->mesh);
-    f.part = separate->mesh;
-  }
-  const SurfaceIndex& index = separate_index ? *separate_index : design;
+  std::optional<SurfaceIndex> check_index;
+  if (f.check_part) check_index.emplace(*f.check_part);
+  progress(fmt::format("collision checks against {} ({} triangles), clearance {} mm", job.part.string(),
+                       f.part ? f.part->faces.size() : f.surface.mesh.faces.size(), job.clearance_mm));
   CollisionOptions o;
   o.clearance_mm = job.clearance_mm;
   o.gouge_tolerance_mm = job.tolerance_mm;
+  CollisionOptions o_part = o;
+  o_part.gouge_tolerance_mm = job.check_tolerance_mm.value_or(job.tolerance_mm);
+  const auto check = [&](const std::vector<ToolPose>& poses, const ToolAssembly& assembly) {
+    CollisionReport r = check_collisions(design, poses, assembly, o);
+    if (check_index) {
+      const CollisionReport c = check_collisions(*check_index, poses, assembly, o_part);
+      r.intervals.insert(r.intervals.end(), c.intervals.begin(), c.intervals.end());
+      r.positions_checked = std::max(r.positions_checked, c.positions_checked);
+      r.queries += c.queries;
+      std::stable_sort(r.intervals.begin(), r.intervals.end(), [](const CollisionInterval& a, const CollisionInterval& b) {
+        return a.pose_begin < b.pose_begin;
+      });
+    }
+    return r;
+  };
   for (FittedPatch& p : f.patches) {
     const FitResult& r = p.fit.fit;
     p.poses = poses_mm(job, f.frame, r.rails);
@@ -134,12 +176,12 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
     const double half = 0.5 * p.assembly.cutter_length();
     p.contacts.clear();
     for (const ToolPose& q : p.poses) p.contacts.push_back(design.closest(q.tip + half * q.axis).point);
-    p.collisions = check_collisions(index, p.poses, p.assembly, o);
+    p.collisions = check(p.poses, p.assembly);
     for (PassMotion& pm : p.earlier_passes) {  // earlier passes: their own poses, the same tool
       pm.poses = poses_mm(job, f.frame, pm.rails);
       pm.contacts.clear();
       for (const ToolPose& q : pm.poses) pm.contacts.push_back(design.closest(q.tip + half * q.axis).point);
-      const CollisionReport c = check_collisions(index, pm.poses, p.assembly, o);
+      const CollisionReport c = check(pm.poses, p.assembly);
       p.collisions.intervals.insert(p.collisions.intervals.end(), c.intervals.begin(), c.intervals.end());
       p.collisions.positions_checked += c.positions_checked;
     }
@@ -171,6 +213,14 @@ void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, con
                        job.tolerance_mm, fp.fit.seconds_init, fp.fit.seconds_opt));
   if (r.status == FitStatus::SolverFailed)
     progress(fmt::format("patch {}: the least-squares solver failed ({}); the last good motion is kept", name, r.message));
+  if (const auto& c = fp.fit.check_trim) {
+    const Eigen::Vector3d at = out.frame.to_mm(c->at);
+    progress(fmt::format("patch {}: {} t {:.3f}-{:.3f}: the {} would {} {:.3f} mm {} the part at ({:.3f}, {:.3f}, {:.3f})",
+                         name, fp.fit.check_refused ? "not trimmed (no clear stretch), kept" : "trimmed to", fp.fit.t_from,
+                         fp.fit.t_to, c->body ? "shank or holder" : "cutter", c->body ? "come" : "cut",
+                         out.frame.length_to_mm(c->intrusion), c->body ? "inside the clearance of" : "into", at.x(), at.y(),
+                         at.z()));
+  }
 }
 
 // `patches: auto`: detect_patches over the whole surface with the job's fit options; the detected
@@ -180,11 +230,47 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   co.coverage = job.cover->coverage;
   co.max_patches = job.cover->max_patches;
   co.patch.fit = fit;
+  co.patch.fit.check = {};  // detection as without a part; the part is applied to each detected patch below
   co.patch.tolerance = out.frame.length_to_unit(job.tolerance_mm);
+  // Candidate radii within the tool's limits (max_diameter, min_diameter): the default candidates
+  // below the largest allowed, and that radius at 1/2, 3/4 and full.
+  const ToolConstraints& tc = fit.constraints;
+  if (std::isfinite(tc.max_radius) || tc.min_radius > 0) {
+    std::vector<double> radii;
+    for (double r : co.radii)
+      if (r <= tc.max_radius && r >= tc.min_radius) radii.push_back(r);
+    if (std::isfinite(tc.max_radius))
+      for (double f : {0.5, 0.75, 1.0})
+        if (f * tc.max_radius >= tc.min_radius) radii.push_back(f * tc.max_radius);
+    std::sort(radii.begin(), radii.end());
+    radii.erase(std::unique(radii.begin(), radii.end()), radii.end());
+    if (!radii.empty()) co.radii = radii;
+  }
   Detection d = detect_patches(index, co, [&](const CoverProgress& c) {
     progress(fmt::format("detect: {}: seed {} of {}, {} patches, coverage {:.1f}%", c.stage, c.seed, c.seeds, c.patches,
                          100 * c.coverage));
   });
+  // The part as a check surface (fit.check): each patch refitted or trimmed to keep clear of it
+  // (with_check), and the whole surface's union measured again.
+  if (fit.check.part && !d.patches.empty()) {
+    PatchOptions po = co.patch;
+    po.fit.check = fit.check;
+    po.trim_gouges = true;
+    std::vector<const MachinedSurface*> machined;
+    for (DetectedPatch& dp : d.patches) {
+      po.on_stage = [&](const std::string& s) { progress(fmt::format("detect: {}: {}", dp.spec.name, s)); };
+      dp.fit = with_check(index, std::move(dp.fit), po);
+      dp.spec.lines = lines_of(dp.fit.fit.rails, co.lines);
+      machined.push_back(&dp.fit.machined);
+    }
+    UnionDeviation u = union_deviation(machined, index.mesh().vertices.size());
+    d.owner = std::move(u.owner);
+    d.deviation = std::move(u.deviation);
+    d.coverage = coverage(index.mesh(), d.deviation, co.patch.tolerance);
+    d.overcut = 0;
+    for (double x : d.deviation)
+      if (std::isfinite(x)) d.overcut = std::max(d.overcut, -x);
+  }
   // Detection does not know the machine: turn every patch so that its tool stands with the tip
   // down and the holder up in the work frame (the setup applied), as a spindle holds it.
   const Eigen::Vector3d up_part = setup_rotation(job.post).transpose() * Eigen::Vector3d::UnitZ();
@@ -280,6 +366,24 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   out.frame = unit_diagonal_frame(mesh);
   out.unit_surface = transformed(mesh, out.frame);
   const SurfaceIndex index(out.unit_surface);
+  // The part as the fit's check surface (without Φ's twin), unit frame; loaded before any fit so a
+  // bad part file fails first.
+  std::optional<SurfaceIndex> check_index, solid_index;
+  if (const std::optional<LoadedMesh> part = load_job_part(job)) {
+    const CheckPart cp = check_part(transformed(part->mesh, out.frame), index, out.frame.length_to_unit(job.tolerance_mm));
+    out.part = part->mesh;
+    out.check_part = cp.mesh;
+    for (Eigen::Vector3d& v : out.check_part->vertices) v = out.frame.to_mm(v);
+    out.check_twin_faces = cp.twin_faces;
+    progress(fmt::format("part {}: {} triangles, {} of them the design surface's twin (left to the surface itself){}; the fit "
+                         "keeps the tool out of the rest",
+                         job.part.string(), part->mesh.faces.size(), cp.twin_faces, cp.turned_outward ? ", turned outward" : ""));
+    check_index.emplace(cp.mesh);
+    TriMesh whole = transformed(part->mesh, out.frame);
+    if (cp.turned_outward)
+      for (auto& face : whole.faces) std::swap(face[1], face[2]);
+    solid_index.emplace(std::move(whole));
+  }
   std::optional<std::pair<ToolRadius, double>> catalogue;
   if (job.tool.catalogue) catalogue = unit_catalogue_tool(*job.tool.catalogue, out.frame);
   const auto fit_options = [&] {
@@ -288,6 +392,15 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     if (job.robust_mm) o.robust_scale = out.frame.length_to_unit(*job.robust_mm);
     o.constraints = unit_constraints(job.tool, out.frame);
     if (catalogue) o.fixed_tool = catalogue->first;
+    if (check_index) {
+      o.check.part = &*check_index;
+      o.check.solid = &*solid_index;
+      o.check.tolerance = out.frame.length_to_unit(job.check_tolerance_mm.value_or(job.tolerance_mm));
+      o.check.clearance = out.frame.length_to_unit(job.clearance_mm);
+      o.check.body = body_samples(job.holder, out.frame);
+      // Detected patches are turned tip down afterwards (detect_job): the holder goes up.
+      if (job.cover) o.check.up = setup_rotation(job.post).transpose() * Eigen::Vector3d::UnitZ();
+    }
     return o;
   };
   if (job.cover) {
@@ -510,9 +623,26 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
                    {"worst_pose", iv.worst_pose},
                    {"depth_mm", round_mm(iv.max_depth_mm)},
                    {"at_mm", vec_mm(iv.at)}});
+  // With a separate part: the fit kept the tool out of it (check surface), trimming where it could not.
+  if (f.check_part) {
+    nlohmann::ordered_json c = {{"part_triangles", f.part ? f.part->faces.size() : 0},
+                                {"twin_triangles_left_to_the_surface", f.check_twin_faces},
+                                {"check_tolerance_mm", job.check_tolerance_mm.value_or(job.tolerance_mm)},
+                                {"clearance_mm", job.clearance_mm},
+                                {"kept_t", {p.fit.t_from, p.fit.t_to}},
+                                {"worst_intrusion_mm", round_mm(fr.length_to_mm(p.fit.check_intrusion))},
+                                {"refused", p.fit.check_refused}};
+    if (const auto& t = p.fit.check_trim)
+      c["trimmed_because"] = {{"component", t->body ? "shank or holder" : "cutter"},
+                              {"intrusion_mm", round_mm(fr.length_to_mm(t->intrusion))},
+                              {"at_mm", vec_mm(fr.to_mm(t->at))}};
+    c["note"] = "intrusion: beyond check_tolerance for the cutter, inside the clearance for shank and holder (<= 0: clear)";
+    j["check_surface"] = std::move(c);
+  }
   j["collision_check"] = {{"part", job.part.string()},
                           {"clearance_mm", job.clearance_mm},
                           {"gouge_tolerance_mm", job.tolerance_mm},
+                          {"part_gouge_tolerance_mm", job.check_tolerance_mm.value_or(job.tolerance_mm)},
                           {"positions_checked", p.collisions.positions_checked},
                           {"note", "depth_mm > 0: inside the tool/shank/holder; tool: inside the cutter beyond the tolerance; "
                                    "shank/holder: closer than the clearance when <= 0"}};
@@ -637,6 +767,7 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
       job.file.filename().string(), cover_summary(job, f));
   y += "surface: " + file_key(job.surface, job.surface_faces, job.surface_deflection_mm) + "\n";
   if (job.part_given) y += "part: " + file_key(job.part, {}, job.part_deflection_mm) + "\n";
+  if (job.check_tolerance_mm) y += fmt::format("check_tolerance: {}\n", num(*job.check_tolerance_mm));
   const HolderJob& h = job.holder;
   if (h.shank_length > 0 || h.length > 0 || h.cylinder_length > 0)
     y += fmt::format("holder: {{shank_length: {}, shank_diameter: {}, length: {}, diameter: {}, diameter_far: {}, "

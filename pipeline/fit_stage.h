@@ -62,6 +62,10 @@ struct FittedJob {
   TriMesh unit_surface;
   std::vector<FittedPatch> patches;
   std::optional<TriMesh> part;  // the job's separate `part:` (mm) once checked; unset: the surface is the part
+  // With `part:`: the part without the design surface's twin, faces out of the material (mm): the
+  // fit's check surface and, with the design surface, what the collision check judges.
+  std::optional<TriMesh> check_part;
+  int check_twin_faces = 0;
   // `patches: auto`: the detected patches as jobs (init: lines), complete before any FittedPatch::job
   // points into it; a moved vector keeps its elements, so FittedJob stays movable.
   std::vector<PatchJob> detected;

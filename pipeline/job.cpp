@@ -222,7 +222,7 @@ Job read_job(const std::filesystem::path& file) {
   const Reader r(name);
   const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
-  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post", "allowance", "passes", "overtravel"});
+  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "check_tolerance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post", "allowance", "passes", "overtravel"});
 
   Job job;
   job.file = file;
@@ -248,6 +248,10 @@ Job read_job(const std::filesystem::path& file) {
     if (hj.length + hj.cylinder_length > 0 && !(hj.diameter > 0)) r.fail(h, "holder.diameter", "must be > 0 with a holder");
   }
   if (root["clearance"]) job.clearance_mm = in_range(r, root["clearance"], "clearance", 0.01, 1000, "mm");
+  if (root["check_tolerance"]) {
+    if (!root["part"]) r.fail(root["check_tolerance"], "check_tolerance", "needs part: (the part the fit keeps the tool out of)");
+    job.check_tolerance_mm = in_range(r, root["check_tolerance"], "check_tolerance", 1e-4, 10, "mm");
+  }
   if (root["feed"]) job.feed_mm_min = in_range(r, root["feed"], "feed", 0.01, 1e5, "mm/min");
   if (root["spindle"]) job.spindle_rpm = in_range(r, root["spindle"], "spindle", 1, 2e5, "rpm");
   if (root["lead_in"]) job.lead_in_mm = in_range(r, root["lead_in"], "lead_in", 0, max_length_mm, "mm");

@@ -79,6 +79,9 @@ struct Job {
   bool part_given = false;                      // `part:` present (it may name the surface's own model)
   HolderJob holder;
   double clearance_mm = 1.0;      // shank and holder to part
+  // With `part:`: how deep the cutter may enter the part (besides the design surface, which is
+  // judged with `tolerance`); the fit keeps the tool out of it. Unset: tolerance.
+  std::optional<double> check_tolerance_mm;
   double feed_mm_min = 1000, spindle_rpm = 10000;  // for the CL-data
   double lead_in_mm = 5, retract_mm = 50;          // approach and retract along the tool axis
   double tolerance_mm = 0.01;

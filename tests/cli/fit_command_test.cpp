@@ -222,3 +222,77 @@ TEST_CASE("flankcam fit checks shank and holder against the part: a shank wider 
     }
   }
 }
+
+namespace {
+// OBJ text of a mesh (1-based faces).
+std::string obj_text(const flankcam::TriMesh& m) {
+  std::string s;
+  for (const Eigen::Vector3d& v : m.vertices) s += fmt::format("v {} {} {}\n", v.x(), v.y(), v.z());
+  for (const auto& f : m.faces) s += fmt::format("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+  return s;
+}
+// An axis-aligned closed box, faces outward, 12 triangles sharing 8 corners.
+flankcam::TriMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
+  flankcam::TriMesh m;
+  for (int k = 0; k < 8; ++k) m.vertices.emplace_back(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z());
+  m.faces = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6}, {0, 1, 5}, {0, 5, 4},
+             {2, 6, 7}, {2, 7, 3}, {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
+  return m;
+}
+}  // namespace
+
+TEST_CASE("flankcam fit with a part: the part's twin of the flank is left to the flank, and a post in the way trims the motion") {
+  test::ScratchDir dir("cli-fit-check");
+  // The flank x = 0 (y 0..60, z 0..20 mm, normals +x); the part: the blade behind it, whose flank
+  // side is the flank's twin, and a post at y >= 52 standing where the tool (Ø10 about x = 5) would
+  // end its motion.
+  flankcam::TriMesh flank;
+  for (int k = 0; k <= 10; ++k)
+    for (int j = 0; j <= 30; ++j) flank.vertices.emplace_back(0, 2.0 * j, 2.0 * k);
+  for (int k = 0; k < 10; ++k)
+    for (int j = 0; j < 30; ++j) {
+      const int v = k * 31 + j;
+      flank.faces.push_back({v, v + 1, v + 32}), flank.faces.push_back({v, v + 32, v + 31});
+    }
+  test::write_text(dir.file("flank.obj"), obj_text(flank));
+  flankcam::TriMesh part = box_mesh({-10, 0, 0}, {0, 60, 20});
+  const flankcam::TriMesh post = box_mesh({1, 52, -10}, {30, 80, 100});
+  const int n = int(part.vertices.size());
+  part.vertices.insert(part.vertices.end(), post.vertices.begin(), post.vertices.end());
+  for (auto f : post.faces) part.faces.push_back({f[0] + n, f[1] + n, f[2] + n});
+  test::write_text(dir.file("part.obj"), obj_text(part));
+  const std::string job =
+      "surface: flank.obj\n"
+      "part: part.obj\n"
+      "check_tolerance: 0.001\n"
+      "tool: {shape: general}\n"
+      "tolerance: 0.005\n"
+      "patches:\n  - name: flank\n    init: lines\n    lines:\n"
+      "      - [5, 5, 0, 5, 5, 20]\n      - [5, 20, 0, 5, 20, 20]\n      - [5, 35, 0, 5, 35, 20]\n      - [5, 50, 0, 5, 50, 20]\n";
+  test::write_text(dir.file("job.yaml"), job);
+  const test::RunResult run = test::run_flankcam("fit " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
+  // The twin is left out (the flank is judged with the fitted tolerance); the post is kept clear of.
+  REQUIRE_MESSAGE(run.code == 0, run.err);
+  CHECK(run.err.find("24 triangles, 2 of them the design surface's twin") != std::string::npos);
+  const nlohmann::json report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const auto& p = report["patches"][0];
+  CHECK(p["collisions"].empty());
+  const auto& c = p["check_surface"];
+  CHECK(double(c["worst_intrusion_mm"]) <= 0.0);
+  CHECK(int(c["twin_triangles_left_to_the_surface"]) == 2);
+  CHECK(double(c["check_tolerance_mm"]) == 0.001);
+  CHECK_FALSE(bool(c["refused"]));
+  CHECK(double(p["eps_opt_mm"]) < 0.005);
+  CHECK(double(p["coverage"]) > 0.6);  // the flank up to the post, less the tool's radius
+  // The motion stops short of the post: the last CL point's tool (radius 5) ends before y = 52.
+  const std::string apt = test::read_text(dir.file("out/flank.apt"));
+  CHECK(apt.find("GOTO") != std::string::npos);
+  // check_tolerance needs a part.
+  std::string no_part = job;
+  no_part.erase(no_part.find("part: part.obj\n"), 15);
+  test::write_text(dir.file("bad.yaml"), no_part);
+  const test::RunResult bad = test::run_flankcam("fit " + dir.file("bad.yaml") + " --out " + dir.file("bad"), dir);
+  CHECK(bad.code == 2);
+  CHECK(bad.err.find("bad.yaml:2: check_tolerance: needs part:") != std::string::npos);
+  CHECK_FALSE(std::filesystem::exists(dir.file("bad")));
+}

@@ -1,0 +1,178 @@
+// Check surfaces in the fit (issue 15): the part keeps the tool out, by tilting where the design
+// surface allows it and by trimming where nothing can; the part's twin of the design surface is
+// left to the design surface itself.
+#include <doctest/doctest.h>
+
+#include <Eigen/Geometry>
+#include <cmath>
+
+#include "core/check_surface.h"
+#include "core/fitting.h"
+#include "core/patch.h"
+
+using namespace flankcam;
+
+namespace {
+// The flank x = 0 over y in [0, 60], z in [0, 20] (mm), normals +x (out of the material, x < 0).
+TriMesh flank(int ny = 31, int nz = 11) {
+  TriMesh m;
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j) m.vertices.emplace_back(0, 60.0 * j / (ny - 1), 20.0 * k / (nz - 1));
+  for (int k = 0; k + 1 < nz; ++k)
+    for (int j = 0; j + 1 < ny; ++j) {
+      const int v = k * ny + j;
+      m.faces.push_back({v, v + 1, v + ny + 1});
+      m.faces.push_back({v, v + ny + 1, v + ny});
+    }
+  return m;
+}
+
+// A closed box, faces outward; each side split into n x n squares.
+TriMesh box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n = 1) {
+  TriMesh m;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int side = 0; side < 2; ++side) {
+      const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+      const int base = int(m.vertices.size());
+      for (int b = 0; b <= n; ++b)
+        for (int a = 0; a <= n; ++a) {
+          Eigen::Vector3d p;
+          p[axis] = side ? hi[axis] : lo[axis];
+          p[u] = lo[u] + (hi[u] - lo[u]) * a / n;
+          p[v] = lo[v] + (hi[v] - lo[v]) * b / n;
+          m.vertices.push_back(p);
+        }
+      for (int b = 0; b < n; ++b)
+        for (int a = 0; a < n; ++a) {
+          const int c = base + b * (n + 1) + a;
+          // (u, v, axis) is right-handed: counter-clockwise in (u, v) faces +axis.
+          if (side)
+            m.faces.push_back({c, c + 1, c + n + 2}), m.faces.push_back({c, c + n + 2, c + n + 1});
+          else
+            m.faces.push_back({c, c + n + 2, c + 1}), m.faces.push_back({c, c + n + 1, c + n + 2});
+        }
+    }
+  // One vertex per corner point: the sides share their edges (a closed mesh).
+  TriMesh out;
+  std::vector<int> index;
+  for (const Eigen::Vector3d& p : m.vertices) {
+    int found = -1;
+    for (size_t k = 0; k < out.vertices.size() && found < 0; ++k)
+      if ((out.vertices[k] - p).norm() < 1e-9) found = int(k);
+    if (found < 0) found = int(out.vertices.size()), out.vertices.push_back(p);
+    index.push_back(found);
+  }
+  for (auto f : m.faces) out.faces.push_back({index[size_t(f[0])], index[size_t(f[1])], index[size_t(f[2])]});
+  return out;
+}
+
+TriMesh to_unit(TriMesh m, const Similarity& fr) { return transformed(m, fr); }
+
+struct Setup {
+  TriMesh phi_mm = flank();
+  Similarity fr = unit_diagonal_frame(phi_mm);
+  SurfaceIndex phi{transformed(phi_mm, fr)};
+  FitOptions o;
+  Rails initial;
+  Setup() {
+    o.shape = ToolShape::General;
+    std::vector<AxisLine> lines;
+    for (double y : {5.0, 20.0, 35.0, 50.0})  // vertical axis lines 5 mm off the flank, tip at z = 0
+      lines.push_back({fr.to_unit({5, y, 0}), fr.to_unit({5, y, 20})});
+    initial = rails_from_lines(lines, 0, 0, o);
+  }
+  // Shank Ø6 over 10 mm, then a holder Ø20 over 30 mm (mm, beyond the cutter's end).
+  std::vector<Eigen::Vector2d> body() const {
+    std::vector<Eigen::Vector2d> b;
+    for (int k = 0; k <= 40; ++k) b.emplace_back(fr.length_to_unit(k), fr.length_to_unit(k <= 10 ? 3.0 : 10.0));
+    return b;
+  }
+  // How far the axis leans away from the wall (+x) at the holder end, mm: x of b minus x of a.
+  double lean_mm(const Rails& r, double t) const {
+    return fr.length_to_mm((r.b.point(t) - r.a.point(t)).x());
+  }
+};
+}  // namespace
+
+TEST_CASE("a tool standing next to a wall tilts away instead of cutting it") {
+  Setup s;
+  // The opposite wall at x >= 14 mm: the upright tool's holder (radius 10 about x = 5) reaches x = 15.
+  const SurfaceIndex wall(to_unit(box({14, -20, -10}, {30, 80, 100}, 4), s.fr));
+  // The tip keeps its Ø10 (a tool may not simply become thinner and move closer to the flank).
+  s.o.constraints.min_tip_radius = s.fr.length_to_unit(4.9);
+  s.o.constraints.max_cone_angle_rad = 15 * M_PI / 180;
+  const FitResult free = optimize_motion(s.phi, s.initial, s.o);
+  FitOptions o = s.o;
+  o.check.part = &wall;
+  o.check.tolerance = s.fr.length_to_unit(0.005);
+  o.check.clearance = s.fr.length_to_unit(1.0);
+  o.check.body = s.body();
+  const FitResult fit = optimize_motion(s.phi, s.initial, o);
+  // Without the wall the axis stays upright and the holder enters it (1 mm deep plus the clearance).
+  const CheckProfile before = check_profile(free.rails, free.tool, o.check, 50, o.samples_s);
+  CHECK(std::abs(s.lean_mm(free.rails, 0.5)) < 0.05);
+  CHECK(s.fr.length_to_mm(*std::max_element(before.intrusion.begin(), before.intrusion.end())) > 1.9);
+  // With it the axis leans away (the tool becomes a cone that still lies flat on the flank) and
+  // shank and holder keep the clearance everywhere, while the flank is still cut within 0.005 mm.
+  const CheckProfile after = check_profile(fit.rails, fit.tool, o.check, 50, o.samples_s);
+  const double worst = s.fr.length_to_mm(*std::max_element(after.intrusion.begin(), after.intrusion.end()));
+  MESSAGE("lean ", s.lean_mm(fit.rails, 0.5), " mm over the cutter, tip axis at x = ", s.fr.to_mm(fit.rails.a.point(0.5)).x(),
+          " mm, worst intrusion ", worst, " mm, eps ",
+          s.fr.length_to_mm(fit.eps_opt.max), " mm");
+  CHECK(s.lean_mm(fit.rails, 0.5) < -1.0);
+  CHECK(s.fr.to_mm(fit.rails.a.point(0.5)).x() > 4.85);
+  CHECK(worst < 0.05);
+  CHECK(s.fr.length_to_mm(fit.eps_opt.max) < 0.005);
+  CHECK(fit.tool.d(1.0) < fit.tool.d(0.0));  // narrower at the holder end: a taper
+}
+
+TEST_CASE("a post in the cutter's way: the motion is kept clear of it or trimmed, and says why") {
+  Setup s;
+  // A post at y >= 52 mm standing where the cutter (Ø10 about x = 5) would end its motion (y = 55).
+  const SurfaceIndex post(to_unit(box({1, 52, -10}, {30, 80, 100}, 4), s.fr));
+  PatchOptions po;
+  po.fit = s.o;
+  po.fit.check.part = &post;
+  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
+  po.tolerance = s.fr.length_to_unit(0.01);
+  PatchSpec spec;
+  spec.name = "p";
+  for (double y : {5.0, 20.0, 35.0, 50.0}) spec.lines.push_back({s.fr.to_unit({5, y, 0}), s.fr.to_unit({5, y, 20})});
+  const PatchFit f = fit_patch(s.phi, spec, po);
+  // Kept clear: the cutter's worst intrusion is within the tolerance, and the last position's tool
+  // ends before the post.
+  MESSAGE("t ", f.t_from, "-", f.t_to, ", intrusion ", s.fr.length_to_mm(f.check_intrusion), " mm, coverage ", f.coverage);
+  CHECK(f.check_intrusion <= 0);
+  CHECK(!f.check_refused);
+  const double y_end = s.fr.to_mm(f.fit.rails.a.point(1)).y() + s.fr.length_to_mm(f.fit.tool.d(0));
+  CHECK(y_end < 52.0 + 0.005);
+  // The flank up to the post (less the cutter's radius) is still cut: 38 of its 60 mm at least.
+  CHECK(f.coverage > 38.0 / 60);
+  // Without the post the motion ran on to y = 55, into it; the trimming (or the fit) says where it hit.
+  PatchOptions free = po;
+  free.fit.check = {};
+  const PatchFit g = fit_patch(s.phi, spec, free);
+  CHECK(s.fr.to_mm(g.fit.rails.a.point(1)).y() + s.fr.length_to_mm(g.fit.tool.d(0)) > 52.5);
+}
+
+TEST_CASE("the part's twin of the design surface is left out of the check surface, and a part is turned outward") {
+  const TriMesh phi_mm = flank(31, 11);
+  const SurfaceIndex phi(phi_mm);
+  // The blade block behind the flank: its x = 0 side is the flank's twin (4 x 4 squares: 32 triangles).
+  const TriMesh block = box({-10, 0, 0}, {0, 60, 20}, 4);
+  const CheckPart cp = check_part(block, phi, 0.01);
+  CHECK(cp.twin_faces == 32);
+  CHECK(cp.mesh.faces.size() == block.faces.size() - 32);
+  CHECK(!cp.turned_outward);
+  for (size_t f = 0; f < cp.mesh.faces.size(); ++f) CHECK(face_normal(cp.mesh, int(f)).x() < 0.5);  // no +x face left
+  // Inward faces (a closed part read with the other orientation) are turned outward.
+  TriMesh inward = block;
+  for (auto& f : inward.faces) std::swap(f[1], f[2]);
+  const CheckPart turned = check_part(inward, phi, 0.01);
+  CHECK(turned.turned_outward);
+  CHECK(turned.twin_faces == 32);
+  CHECK(signed_volume(merged(turned.mesh, phi_mm)) > 0);  // closed again by the flank: outward
+  // A face near the flank but across it (the other side of a thin edge) is kept.
+  const TriMesh thin = box({-0.005, 0, 0}, {0, 60, 20}, 4);
+  CHECK(check_part(thin, phi, 0.01).twin_faces == 32);
+}
