@@ -202,6 +202,21 @@ inline void bound4(const Node4& w, float x, float y, float z, float margin, floa
 #endif
 }
 
+// Bit j set: lane j holds a child and its bound d2[j] is within prune2.
+inline int near_mask(const Node4& w, const float* d2, float prune2) {
+#ifdef __SSE2__
+  const int near = _mm_movemask_ps(_mm_cmple_ps(_mm_load_ps(d2), _mm_set1_ps(prune2)));
+  const int empty = _mm_movemask_ps(_mm_castsi128_ps(
+      _mm_cmpeq_epi32(_mm_load_si128(reinterpret_cast<const __m128i*>(w.link)), _mm_set1_epi32(kEmptyLane))));
+  return near & ~empty;
+#else
+  int mask = 0;
+  for (int j = 0; j < 4; ++j)
+    if (w.link[j] != kEmptyLane && d2[j] <= prune2) mask |= 1 << j;
+  return mask;
+#endif
+}
+
 }  // namespace
 
 struct SurfaceIndex::Impl {
@@ -215,6 +230,7 @@ struct SurfaceIndex::Impl {
   double slack = 0;                         // absolute rounding allowance of the box bounds
   double coordinate_bound = 0;              // largest |coordinate| of a vertex
   BoundingBox box;                          // of the vertices (orders batch queries)
+  bool prefetching = false;                 // the tree is far bigger than a core's caches
 
   double face_distance2(int f, const Eigen::Vector3d& p) const {
     const auto& F = mesh.faces[f];
@@ -223,7 +239,17 @@ struct SurfaceIndex::Impl {
   }
 
   void build();
-  int search(const Eigen::Vector3d& p) const;
+  // The closest face's slot in `tri` (-1: none) and its closest point.
+  struct Hit {
+    int slot = -1;
+    TrianglePoint tp;
+  };
+  Hit search(const Eigen::Vector3d& p, int hint_leaf = -1) const;
+  Footpoint footpoint(const Eigen::Vector3d& p, const Hit& h) const {
+    if (h.slot < 0) return no_footpoint();
+    const LeafFace& T = tri[size_t(h.slot)];
+    return make_footpoint(p, T.face, h.tp, T.boundary);
+  }
 
   // The footpoint of p on face f, whose closest point is tp; `boundary` as in LeafFace.
   Footpoint make_footpoint(const Eigen::Vector3d& p, int f, const TrianglePoint& tp, int boundary) const {
@@ -433,18 +459,21 @@ void SurfaceIndex::Impl::build() {
     return index;
   };
   collapse(collapse, nodes[0].leaf() ? std::vector<int>{0} : std::vector<int>{nodes[0].link, nodes[0].right});
+  prefetching = wide.size() * sizeof(Node4) + bounds.size() * (sizeof(LeafBound) + kLeafFaces * sizeof(LeafFace)) > (8u << 20);
 }
 
 // Ordered depth-first search: the nearer children first, a child is skipped when its box is
 // farther than the best face so far. Among faces at the same distance the lowest index wins, as in
-// closest_brute_force, so the answer is the same face whatever the tree's shape. Returns the slot
-// in `tri` of the closest face, -1 if there is none.
+// closest_brute_force, so the answer is the same face whatever the tree's shape or the order in
+// which faces are met. `hint_leaf` (the first slot of a leaf, e.g. the previous query's answer in a
+// batch) is tested first: a near face found early prunes most of the tree, and the answer does not
+// depend on it.
 //
 // The boxes are bounded in float: the local coordinates R p - m are off by at most a few float
 // ulps of |p|_1 + |m| (R's entries are below 1 + 1e-7), so |local| - e is lowered by kFloatError
 // (|p|_1 + |m|) (the |m| part is in e since build) and the squared bound compared with a prune
 // radius raised by kFloatError: a box is never pruned when the double bound would keep it.
-int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
+SurfaceIndex::Impl::Hit SurfaceIndex::Impl::search(const Eigen::Vector3d& p, int hint_leaf) const {
   struct Entry {
     int link;
     float d2;
@@ -452,7 +481,8 @@ int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
   Entry stack[256];
   int top = 0;
   double best2 = std::numeric_limits<double>::infinity();
-  int face = -1, slot = -1;
+  int face = -1;
+  Hit hit;
   // A box is pruned only when it is farther than the best face by more than the rounding slack.
   const auto bound = [&](double b2) {
     const double b = std::sqrt(b2) + slack;
@@ -466,17 +496,43 @@ int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
   // The leaf bounds subtract n.a and u.corner (|.| <= 2 coordinate_bound) instead of a centre.
   const float leaf_margin = float(kFloatError * (std::abs(p.x()) + std::abs(p.y()) + std::abs(p.z()) + 2 * coordinate_bound));
   const Node4* W = wide.data();
+  // The faces of a leaf in the order of their float lower bounds, each tested exactly unless its
+  // bound is beyond the best face so far.
+  const auto visit_leaf = [&](int first, int count) {
+    alignas(16) float lb[4];
+    leaf_bound4(bounds[size_t(first / kLeafFaces)], x, y, z, leaf_margin, lb);
+    int lane[4] = {0, 1, 2, 3};
+    for (int i = 1; i < count; ++i)
+      for (int j = i; j > 0 && lb[lane[j]] < lb[lane[j - 1]]; --j) std::swap(lane[j], lane[j - 1]);
+    for (int i = 0; i < count; ++i) {
+      if (lb[lane[i]] * float(1 - 4 * kFloatError) > prune2) break;
+      const int k = first + lane[i];
+      const LeafFace& T = tri[size_t(k)];
+      const TrianglePoint tp = closest_on_triangle(p, T.a, T.b, T.c);
+      if (closer((tp.point - p).squaredNorm(), T.face, best2, face)) {
+        hit = {k, tp};
+        prune2 = bound(best2);
+      }
+    }
+  };
   // Every child that may be visited is fetched while its siblings are bounded: on big meshes the
   // search waits on memory, not arithmetic.
   const auto prefetch = [&](int child) {
-    const auto lines = [](const void* p, size_t bytes) {
-      for (size_t b = 0; b < bytes; b += 64) __builtin_prefetch(static_cast<const char*>(p) + b);
+    const auto lines = [](const void* a, size_t bytes) {
+      for (size_t b = 0; b < bytes; b += 64) __builtin_prefetch(static_cast<const char*>(a) + b);
     };
     if (child >= 0) return lines(W + child, sizeof(Node4));
     const int first = (~child) >> 3;
     lines(&bounds[size_t(first / kLeafFaces)], sizeof(LeafBound));
     lines(&tri[size_t(first)], sizeof(LeafFace) * size_t((~child) & 7));
   };
+  const bool big = prefetching;
+  int hint_link = 0;  // 0 is the root, never a leaf link
+  if (hint_leaf >= 0) {
+    const int count = std::min(kLeafFaces, int(mesh.faces.size()) - hint_leaf);
+    hint_link = ~(hint_leaf * 8 + count);
+    visit_leaf(hint_leaf, count);
+  }
   stack[top++] = {0, 0.0F};
   while (top > 0) {
     const Entry en = stack[--top];
@@ -484,41 +540,36 @@ int SurfaceIndex::Impl::search(const Eigen::Vector3d& p) const {
     int link = en.link;
     for (;;) {
       if (link < 0) {
-        const int first = (~link) >> 3, end = first + ((~link) & 7);
-        alignas(16) float lb[4];
-        leaf_bound4(bounds[size_t(first / kLeafFaces)], x, y, z, leaf_margin, lb);
-        for (int k = first; k < end; ++k) {
-          if (lb[k - first] * float(1 - 4 * kFloatError) > prune2) continue;
-          const LeafFace& T = tri[size_t(k)];
-          const double d2 = (closest_on_triangle(p, T.a, T.b, T.c).point - p).squaredNorm();
-          if (closer(d2, T.face, best2, face)) {
-            slot = k;
-            prune2 = bound(best2);
-          }
-        }
+        if (link != hint_link) visit_leaf((~link) >> 3, (~link) & 7);
         break;
       }
       const Node4& w = W[link];
       alignas(16) float d2[4], key[4];
       bound4(w, x, y, z, margin, d2, key);
-      // The children to visit, nearest first (insertion sort of at most four).
+      // The children to visit (bit j: child j), nearest first (insertion sort of at most four).
+      const int visit = near_mask(w, d2, prune2);
+      if (visit == 0) break;
+      if ((visit & (visit - 1)) == 0) {  // one child: no sorting, no stack
+        link = w.link[__builtin_ctz(unsigned(visit))];
+        if (big) prefetch(link);
+        continue;
+      }
       int order[4], n = 0;
       for (int j = 0; j < 4; ++j) {
-        if (w.link[j] == kEmptyLane || !(d2[j] <= prune2)) continue;
+        if (!(visit >> j & 1)) continue;
         int i = n++;
         for (; i > 0 && key[j] < key[order[i - 1]]; --i) order[i] = order[i - 1];
         order[i] = j;
       }
-      if (n == 0) break;
       for (int i = n - 1; i >= 0; --i) {
         const int child = w.link[order[i]];
-        prefetch(child);
+        if (big) prefetch(child);
         if (i > 0) stack[top++] = {child, d2[order[i]]};
       }
       link = w.link[order[0]];
     }
   }
-  return slot;
+  return hit;
 }
 
 SurfaceIndex::SurfaceIndex(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
@@ -544,47 +595,77 @@ SurfaceIndex::SurfaceIndex(SurfaceIndex&&) noexcept = default;
 SurfaceIndex& SurfaceIndex::operator=(SurfaceIndex&&) noexcept = default;
 
 Footpoint SurfaceIndex::closest(const Eigen::Vector3d& p) const {
+  int hint = -1;
+  return closest_from(p, hint);
+}
+
+Footpoint SurfaceIndex::closest_from(const Eigen::Vector3d& p, int& hint_leaf) const {
+  if (!p.allFinite()) return no_footpoint();
   // Beyond 1e30 the float box bounds would overflow: such a query is answered by brute force.
-  if (p.allFinite() && p.cwiseAbs().maxCoeff() > 1e30) return closest_brute_force(p);
-  const int slot = p.allFinite() ? impl_->search(p) : -1;
-  if (slot < 0) return no_footpoint();
-  const LeafFace& T = impl_->tri[size_t(slot)];
-  return impl_->make_footpoint(p, T.face, closest_on_triangle(p, T.a, T.b, T.c), T.boundary);
+  if (p.cwiseAbs().maxCoeff() > 1e30) return closest_brute_force(p);
+  const Impl::Hit h = impl_->search(p, hint_leaf);
+  if (h.slot >= 0) hint_leaf = h.slot - h.slot % kLeafFaces;
+  return impl_->footpoint(p, h);
 }
 
 namespace {
-// Spreads the low 21 bits of x to every third bit (Morton code).
-uint64_t spread3(uint64_t x) {
-  x &= 0x1fffff;
-  x = (x | x << 32) & 0x1f00000000ffffULL;
-  x = (x | x << 16) & 0x1f0000ff0000ffULL;
-  x = (x | x << 8) & 0x100f00f00f00f00fULL;
-  x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
-  x = (x | x << 2) & 0x1249249249249249ULL;
+// Spreads the low 10 bits of x to every third bit (Morton code).
+uint32_t spread3(uint32_t x) {
+  x &= 0x3ff;
+  x = (x | x << 16) & 0x30000ff;
+  x = (x | x << 8) & 0x300f00f;
+  x = (x | x << 4) & 0x30c30c3;
+  x = (x | x << 2) & 0x9249249;
   return x;
 }
 }  // namespace
 
 std::vector<Footpoint> SurfaceIndex::closest(const std::vector<Eigen::Vector3d>& points) const {
-  std::vector<Footpoint> out(points.size());
   const long n = long(points.size());
-  // Queries are answered in Morton order of their position in the mesh's bounding box, so that
-  // neighbouring queries (on one thread) walk the same nodes while they are in cache; each answer
-  // is independent of the order, so out[i] is the same footpoint as closest(points[i]).
-  std::vector<std::pair<uint64_t, long>> order(static_cast<size_t>(n));
+  std::vector<Footpoint> out(points.size());
+  // Queries are answered in Morton order of their position in the mesh's bounding box (30 bits:
+  // 1024 cells per axis), so that neighbouring queries on one thread walk the same nodes while they
+  // are in cache and each starts from the leaf of the one before. Each answer is independent of
+  // the order and of the start, so out[i] is the same footpoint as closest(points[i]).
+  // Keys: code << 32 | index, sorted by three passes of a 10-bit radix sort on the code.
+  std::vector<uint64_t> key(static_cast<size_t>(n)), spare(static_cast<size_t>(n));
   const Eigen::Vector3d lo = impl_->box.min, size = (impl_->box.max - impl_->box.min).cwiseMax(1e-300);
+  const bool sort = n > 1024 && n < (1L << 32);
+#pragma omp parallel for schedule(static) if (n > 20000)
   for (long i = 0; i < n; ++i) {
     uint64_t code = 0;
-    if (points[size_t(i)].allFinite())
+    if (sort && points[size_t(i)].allFinite())
       for (int k = 0; k < 3; ++k) {
         const double f = std::clamp((points[size_t(i)][k] - lo[k]) / size[k], 0.0, 1.0);
-        code |= spread3(uint64_t(f * 2097151.0)) << k;
+        code |= uint64_t(spread3(uint32_t(f * 1023.0))) << k;
       }
-    order[size_t(i)] = {code, i};
+    key[size_t(i)] = code << 32 | uint64_t(i);
   }
-  if (n > 1024) std::sort(order.begin(), order.end());
-#pragma omp parallel for schedule(static) if (n > 256)
-  for (long j = 0; j < n; ++j) out[size_t(order[size_t(j)].second)] = closest(points[size_t(order[size_t(j)].second)]);
+  if (sort)
+    for (int shift = 32; shift < 62; shift += 10) {
+      std::array<size_t, 1025> start{};
+      for (const uint64_t k : key) ++start[size_t((k >> shift) & 1023) + 1];
+      for (size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
+      for (const uint64_t k : key) spare[start[size_t((k >> shift) & 1023)]++] = k;
+      key.swap(spare);
+    }
+  const auto index = [&](long j) { return sort ? long(key[size_t(j)] & 0xffffffffULL) : j; };
+#pragma omp parallel if (n > 256)
+  {
+    int hint = -1;  // this thread's last answer: the next query in Morton order is usually near it
+#pragma omp for schedule(static)
+    for (long j = 0; j < n; ++j) {
+      // The point and the answer of a query a few ahead are fetched while this one is searched.
+      if (j + 8 < n) {
+        const long ahead = index(j + 8);
+        __builtin_prefetch(&points[size_t(ahead)]);
+        __builtin_prefetch(&out[size_t(ahead)], 1);
+        __builtin_prefetch(reinterpret_cast<const char*>(&out[size_t(ahead)]) + sizeof(Footpoint) - 1, 1);
+      }
+      const long i = index(j);
+      out[size_t(i)] = closest_from(points[size_t(i)], hint);
+    }
+  }
   return out;
 }
 

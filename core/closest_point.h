@@ -56,6 +56,9 @@ class SurfaceIndex {
  struct Impl;  // declared here so that the search visitor in the .cpp can see it
 
  private:
+  // closest(p), starting with the faces of `hint_leaf` (from an earlier query; -1: none), which
+  // becomes the leaf of the answer. The same footpoint whatever the hint: a near one saves time.
+  [[nodiscard]] Footpoint closest_from(const Eigen::Vector3d& p, int& hint_leaf) const;
   std::unique_ptr<Impl> impl_;
 };
 

@@ -131,12 +131,28 @@ std::vector<RotarySolution> rotary_solutions(const Machine& m, const Eigen::Vect
   return {p.begin(), p.end()};
 }
 
-double singularity_angle_deg(const Machine& m, const Eigen::Vector3d& axis_part) {
+double singularity_cosine(const Machine& m, const Eigen::Vector3d& axis_part) {
   const OrientationProblem p = orientation_problem(m, axis_part);
-  const auto angle = [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
-    return std::acos(std::min(1.0, std::abs(a.normalized().dot(b.normalized())))) / kDeg;
+  const auto cosine = [](const Eigen::Vector3d& a, const Eigen::Vector3d& b) {
+    return std::min(1.0, std::abs(a.normalized().dot(b.normalized())));
   };
-  return std::min(angle(p.v, p.w2), angle(p.w, p.w1));
+  return std::max(cosine(p.v, p.w2), cosine(p.w, p.w1));
+}
+
+double singularity_angle_deg(const Machine& m, const Eigen::Vector3d& axis_part) {
+  return std::acos(singularity_cosine(m, axis_part)) / kDeg;
+}
+
+PreparedForward prepare_forward(const Machine& m, double tool_length) {
+  PreparedForward f;
+  for (size_t k = 0; k < 2; ++k) {
+    const RotaryAxis& a = m.rotary[k];
+    f.direction[k] = a.direction;
+    f.table[k] = a.carries == Carrier::Table;
+    f.centre[k] = f.table[k] ? a.pivot : Eigen::Vector3d(a.pivot + (m.gauge_length_mm + tool_length) * m.spindle_direction);
+  }
+  f.spindle = m.spindle_direction;
+  return f;
 }
 
 Eigen::Vector3d linear_joints(const Machine& m, const ToolPose& pose, const std::array<double, 2>& deg, double tool_length) {

@@ -7,6 +7,7 @@
 // degrees, in the Machine's rotary order.
 #pragma once
 #include <Eigen/Core>
+#include <Eigen/Geometry>
 #include <array>
 #include <vector>
 
@@ -56,6 +57,45 @@ struct TableTransform {
   [[nodiscard]] Eigen::Vector3d apply(const Eigen::Vector3d& x_part) const { return R * x_part + t; }
 };
 [[nodiscard]] TableTransform table_transform(const Machine& m, const std::array<double, 2>& rotary_deg);
+
+// Forward kinematics prepared for many evaluations at one tool length (the path solver checks
+// every block at a few points): each rotary axis as its unit direction and a point on it, turned
+// by Rodrigues' formula from the angle's cosine and sine, so that callers stepping through a block
+// supply them without trigonometry. Equals forward() to rounding.
+struct PreparedForward {
+  std::array<Eigen::Vector3d, 2> direction, centre;  // per rotary axis; centre: pivot (heads: from the tip at zero angles)
+  std::array<bool, 2> table{true, true};
+  Eigen::Vector3d spindle = Eigen::Vector3d::UnitZ();
+};
+[[nodiscard]] PreparedForward prepare_forward(const Machine& m, double tool_length_mm);
+// forward(m, {linear_mm, deg}, tool_length_mm) given cos_deg[k] = cos(deg[k]) and sin_deg[k] = sin(deg[k])
+// (inline: the path solver calls it in its innermost loop).
+[[nodiscard]] inline ToolPose forward(const PreparedForward& f, const Eigen::Vector3d& linear_mm,
+                                      const std::array<double, 2>& cos_deg, const std::array<double, 2>& sin_deg) {
+  // R(w, angle) v by Rodrigues' formula (w unit).
+  const auto turned = [](const Eigen::Vector3d& w, double c, double s, const Eigen::Vector3d& v) -> Eigen::Vector3d {
+    return c * v + s * w.cross(v) + ((1 - c) * w.dot(v)) * w;
+  };
+  // As forward(): the head chain (inner axis first) gives the tip's offset and the tool axis in the
+  // machine frame; the table chain undone (outer axis first) brings both into the part frame.
+  Eigen::Vector3d head = Eigen::Vector3d::Zero(), axis = f.spindle;
+  for (int k = 1; k >= 0; --k) {
+    const size_t a = size_t(k);
+    if (f.table[a]) continue;
+    head = f.centre[a] + turned(f.direction[a], cos_deg[a], sin_deg[a], head - f.centre[a]);
+    axis = turned(f.direction[a], cos_deg[a], sin_deg[a], axis);
+  }
+  Eigen::Vector3d tip = linear_mm + head;
+  for (size_t a = 0; a < 2; ++a) {
+    if (!f.table[a]) continue;
+    tip = f.centre[a] + turned(f.direction[a], cos_deg[a], -sin_deg[a], tip - f.centre[a]);
+    axis = turned(f.direction[a], cos_deg[a], -sin_deg[a], axis);
+  }
+  return {tip, axis};
+}
+
+// The cosine of singularity_angle_deg (without the arc cosine: the path solver asks per pose).
+[[nodiscard]] double singularity_cosine(const Machine& m, const Eigen::Vector3d& axis_part);
 
 // Every joint solution of a pose (0, 1 or 2; limits not applied, free angles at 0).
 [[nodiscard]] std::vector<Joints> inverse(const Machine& m, const ToolPose& pose, double tool_length_mm);

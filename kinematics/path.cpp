@@ -31,13 +31,33 @@ struct Candidate {
   std::array<double, 2> deg;
   int linear_ok = -1;  // 1/0: the linear joints are within limits (unwinding does not change them); -1: a free angle, check later
   Eigen::Vector3d linear = Eigen::Vector3d::Zero();  // at `deg` when linear_ok >= 0
-  std::string why;     // when linear_ok == 0
+};
+
+// Why a candidate was rejected, kept as numbers and worded only when the path fails.
+struct Rejection {
+  int axis = -1;      // 0..2 a linear axis, 3, 4 a rotary one; -1: none
+  double value = 0;   // mm or deg
+  [[nodiscard]] std::string text(const Machine& m) const {
+    if (axis < 0) return {};
+    if (axis < 3)
+      return fmt::format("{} = {:.3f} mm is outside its limits [{}, {}]", m.linear[size_t(axis)].name, value,
+                         m.linear[size_t(axis)].min_mm, m.linear[size_t(axis)].max_mm);
+    const RotaryAxis& a = m.rotary[size_t(axis - 3)];
+    return fmt::format("rotary axis {} would need {:.3f} deg, outside its limits [{}, {}]", a.name, value, a.min_deg, a.max_deg);
+  }
 };
 
 // The value of angle `k` for candidate `c` nearest to `prev` that the axis allows (NaN if none).
 double resolve(const RotaryAxis& a, double deg, double prev) {
   if (std::isnan(deg)) deg = prev;  // free: hold
   if (a.continuous) return deg + 360.0 * std::round((prev - deg) / 360.0);
+  // Usually the nearest turn is within the limits and nearer than any other by a margin: the
+  // search below would pick it.
+  const double turn = std::round((prev - deg) / 360.0);
+  if (std::abs(turn) <= 3) {
+    const double v = deg + 360.0 * turn;
+    if (v >= a.min_deg - 1e-9 && v <= a.max_deg + 1e-9 && std::abs(v - prev) < 179) return v;
+  }
   double best = NAN;
   for (int turn = -3; turn <= 3; ++turn) {
     const double v = deg + 360.0 * turn;
@@ -65,20 +85,59 @@ struct Two {
   [[nodiscard]] auto end() const { return items.begin() + long(count); }
 };
 
-bool linear_ok(const Machine& m, const Eigen::Vector3d& x, std::string* why) {
+// The first linear axis outside its limits at x (as a Rejection; axis -1: all within).
+Rejection linear_limits(const Machine& m, const Eigen::Vector3d& x) {
   for (int k = 0; k < 3; ++k)
-    if (x[k] < m.linear[k].min_mm - 1e-9 || x[k] > m.linear[k].max_mm + 1e-9) {
-      if (why)
-        *why = fmt::format("{} = {:.3f} mm is outside its limits [{}, {}]", m.linear[k].name, x[k],
-                           m.linear[k].min_mm, m.linear[k].max_mm);
-      return false;
-    }
-  return true;
+    if (x[k] < m.linear[k].min_mm - 1e-9 || x[k] > m.linear[k].max_mm + 1e-9) return {k, x[k]};
+  return {};
 }
 
+// singularity_angle_deg(m, axis) < singular_deg, compared as cosines.
 bool near_singular(const Machine& m, const Eigen::Vector3d& axis, double singular_deg) {
-  return singularity_angle_deg(m, axis) < singular_deg;
+  return singularity_cosine(m, axis) > std::cos(singular_deg * kDeg);
 }
+
+// Cosines and sines of a pose's rotary angles (the linearisation checks step from them).
+struct Trig {
+  std::array<double, 2> c{1, 1}, s{0, 0};
+};
+Trig trig_of(const std::array<double, 2>& deg) {
+  Trig t;
+  for (size_t k = 0; k < 2; ++k) t.c[k] = std::cos(deg[k] * kDeg), t.s[k] = std::sin(deg[k] * kDeg);
+  return t;
+}
+
+}  // namespace
+
+namespace {
+
+// The pose a fraction f of the way through a block without an intended motion: interpolate()'s
+// straight tip and great-circle axis, with the turn's axis and angle found once per block (for the
+// linearisation checks; inserted poses use interpolate() itself).
+struct BlockSlerp {
+  ToolPose p, q;
+  Eigen::Vector3d w = Eigen::Vector3d::Zero();  // unit axis of the turn from p.axis to q.axis
+  double angle = 0;                             // its angle, rad
+  bool exact = false;                           // (nearly) opposite axes: interpolate() picks the turn
+  BlockSlerp(const ToolPose& a, const ToolPose& b) : p(a), q(b) {
+    const Eigen::Vector3d cr = a.axis.cross(b.axis);
+    const double sn = cr.norm(), cs = a.axis.dot(b.axis);
+    if (cs < 0 && sn < 1e-6) exact = true;
+    else if (sn > 0) w = cr / sn, angle = std::atan2(sn, cs);
+  }
+  [[nodiscard]] ToolPose at(double f) const {
+    if (exact) return interpolate(p, q, f);
+    ToolPose r;
+    r.tip = (1 - f) * p.tip + f * q.tip;
+    if (angle == 0) {
+      r.axis = ((1 - f) * p.axis + f * q.axis).normalized();
+    } else {
+      const double c = std::cos(f * angle), s = std::sin(f * angle);
+      r.axis = c * p.axis + s * w.cross(p.axis) + ((1 - c) * w.dot(p.axis)) * w;
+    }
+    return r;
+  }
+};
 
 }  // namespace
 
@@ -94,18 +153,21 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
 
   // Candidates per pose within the rotary limits (any turn), independent of the predecessor.
   std::vector<Two<Candidate>> cand(static_cast<size_t>(n));
+  std::vector<Two<Rejection>> cand_linear(static_cast<size_t>(n));  // per candidate when linear_ok == 0
   std::vector<char> singular(static_cast<size_t>(n), 0);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
+    cand_linear[i].assign(2, Rejection{});
     for (const RotarySolution& s : rotary_solution_pair(m, poses[i].axis)) {
-      Candidate c{s.deg, -1, Eigen::Vector3d::Zero(), {}};
+      Candidate c{s.deg, -1, Eigen::Vector3d::Zero()};
       for (int k = 0; k < 2; ++k)
         if (s.free[k]) c.deg[k] = NAN, singular[i] = 1;
       if (!s.free[0] && !s.free[1]) {
         c.linear = linear_joints(m, poses[i], s.deg, o.tool_length_mm);
-        c.linear_ok = linear_ok(m, c.linear, &c.why) ? 1 : 0;
+        cand_linear[i][cand[i].size()] = linear_limits(m, c.linear);
+        c.linear_ok = cand_linear[i][cand[i].size()].axis < 0 ? 1 : 0;
       }
-      cand[i].push_back(std::move(c));
+      cand[i].push_back(c);
     }
     if (near_singular(m, poses[i].axis, o.singular_deg)) singular[i] = 1;
   }
@@ -125,7 +187,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     int from = -1;
   };
   std::vector<Two<State>> st(static_cast<size_t>(n));
-  std::string why;
+  Rejection why;  // the last rejection met (worded only if the path fails)
   for (int i = 0; i < n; ++i) {
     st[i].assign(cand[i].size(), State{});
     for (size_t c = 0; c < cand[i].size(); ++c) {
@@ -151,25 +213,30 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
           deg[k] = resolve(a, cd.deg[k], prev[k]);
           if (std::isnan(deg[k])) {
             ok = false;
-            why = fmt::format("rotary axis {} would need {:.3f} deg, outside its limits [{}, {}]", a.name,
-                              cd.deg[k], a.min_deg, a.max_deg);
+            why = {3 + k, cd.deg[k]};
             break;
           }
           if (i > 0) cost += std::abs(deg[k] - prev[k]) / a.max_speed_deg_min;
         }
         if (!ok) continue;
         if (cd.linear_ok == 0) {
-          why = cd.why;
+          why = cand_linear[i][c];
           continue;
         }
-        if (cd.linear_ok < 0 && !linear_ok(m, linear_joints(m, poses[i], deg, o.tool_length_mm), &why)) continue;
+        if (cd.linear_ok < 0) {
+          const Rejection r = linear_limits(m, linear_joints(m, poses[i], deg, o.tool_length_mm));
+          if (r.axis >= 0) {
+            why = r;
+            continue;
+          }
+        }
         if (cost < st[i][c].cost) st[i][c] = {cost, deg, int(p)};
       }
     }
     if (std::none_of(st[i].begin(), st[i].end(), [](const State& s) { return std::isfinite(s.cost); })) {
       out.reachable = false;
       out.failed_pose = i;
-      out.why = why.empty() ? "no joint solution within the limits" : why;
+      out.why = why.axis < 0 ? "no joint solution within the limits" : why.text(m);
       return out;
     }
   }
@@ -217,6 +284,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
       i = j;
     }
   }
+  std::vector<Trig> trig(static_cast<size_t>(n));
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     // The candidate's linear joints when the chosen angles are its own, bit for bit (no turn added).
@@ -224,6 +292,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     q[i].linear = c.linear_ok >= 0 && std::memcmp(c.deg.data(), q[i].rotary.data(), sizeof c.deg) == 0
                       ? c.linear
                       : linear_joints(m, poses[i], q[i].rotary, o.tool_length_mm);
+    trig[i] = trig_of(q[i].rotary);
   }
   for (int i = 0; i < n; ++i) {
     if (i > 0 && cand[i].size() > 1 && cand[i - 1].size() > 1 && !singular[i] &&
@@ -232,14 +301,10 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   }
 
   // Linearisation by recursive bisection of each block.
-  const auto intended = [&](int i0, double tt) {
-    if (motion) return motion(tt);
-    const double f = (tt - t[i0]) / (t[i0 + 1] - t[i0]);
-    return interpolate(poses[i0], poses[i0 + 1], f);
-  };
+  const PreparedForward fk = prepare_forward(m, o.tool_length_mm);
   // The checks sample each block at a few points; the error between them peaks a few percent higher
   // (measured up to 4%), so the blocks are held to 90% of the tolerance.
-  const double tip_tol = 0.9 * o.tolerance_mm, cos_tol = std::cos(0.9 * o.angle_tolerance_deg * kDeg);
+  const double tip_tol2 = std::pow(0.9 * o.tolerance_mm, 2), cos_tol = std::cos(0.9 * o.angle_tolerance_deg * kDeg);
   // Nearest solution of an inserted pose to the joints before it (same unwinding).
   const auto nearest = [&](const ToolPose& p, const Joints& near) -> std::optional<Joints> {
     std::optional<Joints> best;
@@ -256,7 +321,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
       }
       if (!ok || d >= best_d) continue;
       j.linear = linear_joints(m, p, j.rotary, o.tool_length_mm);
-      if (!linear_ok(m, j.linear, nullptr)) continue;
+      if (linear_limits(m, j.linear).axis >= 0) continue;
       best_d = d;
       best = j;
     }
@@ -266,43 +331,71 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     double t;
     ToolPose pose;
     Joints q;
+    Trig trig;
   };
-  // Inserted poses go to `acc` in order; `unresolved` counts sub-blocks left off tolerance.
-  std::function<void(int, const Node&, const Node&, int, std::vector<Node>&, int&)> split =
-      [&](int i0, const Node& a, const Node& b, int depth, std::vector<Node>& acc, int& unresolved) {
-        bool off = false;
-        for (int s = 1; s <= o.checks_per_block && !off; ++s) {
-          const double f = double(s) / (o.checks_per_block + 1);
-          Joints qi;
-          qi.linear = (1 - f) * a.q.linear + f * b.q.linear;
-          for (int k = 0; k < 2; ++k) qi.rotary[k] = (1 - f) * a.q.rotary[k] + f * b.q.rotary[k];
-          const ToolPose got = forward(m, qi, o.tool_length_mm);
-          const ToolPose want = intended(i0, (1 - f) * a.t + f * b.t);
-          off = (got.tip - want.tip).norm() > tip_tol || got.axis.dot(want.axis) < cos_tol;
-        }
-        if (!off) return;
-        if (depth >= o.max_depth) {
-          ++unresolved;
-          return;
-        }
-        const double tm = 0.5 * (a.t + b.t);
-        const ToolPose pm = intended(i0, tm);
-        const std::optional<Joints> qm = nearest(pm, a.q);
-        if (!qm) {
-          ++unresolved;
-          return;
-        }
-        const Node mid{tm, pm, *qm};
-        split(i0, a, mid, depth + 1, acc, unresolved);
-        acc.push_back(mid);
-        split(i0, mid, b, depth + 1, acc, unresolved);
-      };
+  // One block (input poses i0, i0 + 1) and its sub-blocks; inserted poses go to `acc` in order,
+  // `unresolved` counts sub-blocks left off tolerance.
+  struct Block {
+    int i0;
+    std::optional<BlockSlerp> slerp;  // without an intended motion
+    std::vector<Node>& acc;
+    int& unresolved;
+  };
+  const auto intended_at = [&](const Block& b, double tt, bool exact) {
+    if (motion) return motion(tt);
+    const double f = (tt - t[b.i0]) / (t[b.i0 + 1] - t[b.i0]);
+    return exact ? interpolate(poses[b.i0], poses[b.i0 + 1], f) : b.slerp->at(f);
+  };
+  // FK at checks_per_block evenly spaced points of the joint interpolation from a to b (the
+  // controller interpolates joints linearly), the rotary angles stepped by a rotation of their
+  // cosines and sines, against the intended poses there.
+  const auto off_tolerance = [&](const Block& blk, const Node& a, const Node& b) {
+    const double g = 1.0 / (o.checks_per_block + 1);
+    std::array<double, 2> dc{}, ds{};
+    for (size_t k = 0; k < 2; ++k) {
+      const double step = (b.q.rotary[k] - a.q.rotary[k]) * g * kDeg;
+      dc[k] = std::cos(step), ds[k] = std::sin(step);
+    }
+    Trig at = a.trig;
+    for (int s = 1; s <= o.checks_per_block; ++s) {
+      const double f = double(s) / (o.checks_per_block + 1);
+      for (size_t k = 0; k < 2; ++k) {
+        const double c = at.c[k] * dc[k] - at.s[k] * ds[k], sn = at.s[k] * dc[k] + at.c[k] * ds[k];
+        at.c[k] = c, at.s[k] = sn;
+      }
+      const ToolPose got = forward(fk, (1 - f) * a.q.linear + f * b.q.linear, at.c, at.s);
+      const ToolPose want = intended_at(blk, (1 - f) * a.t + f * b.t, false);
+      if ((got.tip - want.tip).squaredNorm() > tip_tol2 || got.axis.dot(want.axis) < cos_tol) return true;
+    }
+    return false;
+  };
+  const auto split = [&](const auto& self, const Block& blk, const Node& a, const Node& b, int depth) -> void {
+    if (!off_tolerance(blk, a, b)) return;
+    if (depth >= o.max_depth) {
+      ++blk.unresolved;
+      return;
+    }
+    const double tm = 0.5 * (a.t + b.t);
+    const ToolPose pm = intended_at(blk, tm, true);
+    const std::optional<Joints> qm = nearest(pm, a.q);
+    if (!qm) {
+      ++blk.unresolved;
+      return;
+    }
+    const Node mid{tm, pm, *qm, trig_of(qm->rotary)};
+    self(self, blk, a, mid, depth + 1);
+    blk.acc.push_back(mid);
+    self(self, blk, mid, b, depth + 1);
+  };
   // Blocks are independent: split them in parallel, merge in order (deterministic).
   std::vector<std::vector<Node>> inserted(static_cast<size_t>(n));
   std::vector<int> unresolved(static_cast<size_t>(n), 0);
 #pragma omp parallel for schedule(dynamic, 256)
-  for (int i = 1; i < n; ++i)
-    split(i - 1, {t[i - 1], poses[i - 1], q[i - 1]}, {t[i], poses[i], q[i]}, 0, inserted[i], unresolved[i]);
+  for (int i = 1; i < n; ++i) {
+    Block blk{i - 1, std::nullopt, inserted[size_t(i)], unresolved[size_t(i)]};
+    if (!motion) blk.slerp.emplace(poses[size_t(i - 1)], poses[size_t(i)]);
+    split(split, blk, {t[i - 1], poses[i - 1], q[i - 1], trig[i - 1]}, {t[i], poses[i], q[i], trig[i]}, 0);
+  }
   // Output position of each input pose (its inserted poses go just before it), then filled on all threads.
   std::vector<size_t> at(static_cast<size_t>(n));
   size_t total = 0;

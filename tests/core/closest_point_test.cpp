@@ -161,6 +161,38 @@ TEST_CASE("closest points equal brute force on a 13k-face envelope at the distan
   check_matches_brute_force(index, shared);
 }
 
+TEST_CASE("the batch call equals brute force bit for bit on dense queries, each started from the last answer, on 1 and 2 threads") {
+  // 4000 queries on 2,000 faces: in Morton order consecutive queries share faces and leaves, so the
+  // search mostly starts from the previous answer's leaf; vertices and edge midpoints add ties.
+  const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), 20, 50, 1);
+  const TriMesh mesh = transformed(g.mesh, unit_diagonal_frame(g.mesh));
+  const SurfaceIndex index(mesh);
+  for (double offset : {0.0, 0.01, 0.05}) {
+    CAPTURE(offset);
+    std::vector<Eigen::Vector3d> queries = offset_points(mesh, offset, 4000, 41);
+    for (size_t f = 0; f < mesh.faces.size(); f += 7) {
+      queries.push_back(mesh.vertices[size_t(mesh.faces[f][0])]);
+      queries.push_back(0.5 * (mesh.vertices[size_t(mesh.faces[f][1])] + mesh.vertices[size_t(mesh.faces[f][2])]));
+    }
+    const int threads = omp_get_max_threads();
+    omp_set_num_threads(1);
+    const auto one = index.closest(queries);
+    omp_set_num_threads(2);
+    const auto two = index.closest(queries);
+    omp_set_num_threads(threads);
+    REQUIRE(one.size() == queries.size());
+    int differ = 0;
+    for (size_t i = 0; i < queries.size(); ++i) {
+      const Footpoint slow = index.closest_brute_force(queries[i]);
+      for (const Footpoint* fast : {&one[i], &two[i]})
+        if (fast->face != slow.face || fast->distance != slow.distance || fast->point != slow.point ||
+            fast->normal != slow.normal || fast->on_boundary != slow.on_boundary)
+          ++differ;
+    }
+    CHECK(differ == 0);
+  }
+}
+
 TEST_CASE("a query that is not finite has no footpoint and does not crash (issue 12, item 1)") {
   const SurfaceIndex index(test::wavy_grid(20, 20, 100, 100, 3));
   const double nan = std::numeric_limits<double>::quiet_NaN(), inf = std::numeric_limits<double>::infinity();
