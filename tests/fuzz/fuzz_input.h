@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 #include <string>
+#include <system_error>
 
 namespace flankcam::fuzz {
 
@@ -17,6 +18,13 @@ inline const std::filesystem::path& folder() {
     if (!mkdtemp(tmpl.data())) std::abort();
     return std::filesystem::path(tmpl);
   }();
+  // Removed at a normal exit (libFuzzer's -max_total_time, -runs); a crash leaves it for a look.
+  // Registered after `dir` is complete, so it runs before `dir` is destroyed.
+  static const int removed_at_exit = std::atexit([] {
+    std::error_code ec;
+    std::filesystem::remove_all(folder(), ec);
+  });
+  (void)removed_at_exit;
   return dir;
 }
 
