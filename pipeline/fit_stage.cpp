@@ -575,6 +575,7 @@ ClProgram pass_program(const Job& job, const FittedJob& f, const FittedPatch& p,
   ClProgram cl = flank_program(p.job->name, pm.poses, p.profile_mm, job.feed_mm_min, job.spindle_rpm, job.lead_in_mm,
                                job.retract_mm);
   cl.tool = tool;
+  cl.cutter = enveloping_cutter(p.profile_mm, p.end_points, p.end_radius_mm);  // tool.end: the corner in CUTTER
   const size_t first = job.lead_in_mm < job.retract_mm ? 2 : 1;
   for (size_t i = 0; i < pm.poses.size(); ++i) cl.moves[first + i].contact = pm.contacts[i];
   cl.comments.push_back(fmt::format("FLANKCAM PASS WITH ALLOWANCE {} MM ON {}, EPS {:.4f} MM", pm.allowance_mm,
@@ -587,6 +588,7 @@ ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p
   ClProgram cl = flank_program(p.job->name, p.poses, p.profile_mm, job.feed_mm_min, job.spindle_rpm, job.lead_in_mm,
                                job.retract_mm);
   cl.tool = tool;
+  cl.cutter = enveloping_cutter(p.profile_mm, p.end_points, p.end_radius_mm);  // tool.end: the corner in CUTTER
   const size_t first = job.lead_in_mm < job.retract_mm ? 2 : 1;  // flank_program: clearance, lead-in, then the pass
   for (size_t i = 0; i < p.poses.size(); ++i) cl.moves[first + i].contact = p.contacts[i];
   cl.comments.push_back(fmt::format("FLANKCAM FIT OF {}, EPS {:.4f} MM, TOLERANCE {} MM", job.surface.filename().string(),

@@ -109,6 +109,14 @@ TEST_CASE("a corner end is in the profile, the collision cutter, the grinding sh
                                                 << by_end << " vertices machined by the torus");
   CHECK(by_end > 0);
   CHECK(b.fit.coverage <= f.fit.coverage + 1e-9);
+  // APT-7 CUTTER: the corner radius and its centre (e radial, f axial); the flat tool has none.
+  REQUIRE(bull.fit.cl_data.at(0));
+  const AptCutter& cut = bull.fit.cl_data[0]->cutter;
+  CHECK(cut.r == 1.5);
+  CHECK(cut.e == doctest::Approx(tip.y()));
+  CHECK(cut.f == doctest::Approx(tip.x() + 1.5));
+  CHECK(cut.d == doctest::Approx(flat.fit.cl_data.at(0)->cutter.d).epsilon(1e-6));  // the same side cone
+  CHECK(flat.fit.cl_data[0]->cutter.r == 0);
   // Programs were posted for both (the back-simulation swept the profile with its end).
   CHECK(!flat.programs.empty());
   CHECK(!bull.programs.empty());
