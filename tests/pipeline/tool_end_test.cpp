@@ -122,6 +122,19 @@ TEST_CASE("a corner end is in the profile, the collision cutter, the grinding sh
   CHECK(!bull.programs.empty());
 }
 
+TEST_CASE("a ball end on the blade's general tool: the checks' cutter starts on the axis, programs are posted") {
+  test::ScratchDir dir("tool-end-ball");
+  const pipeline::RunResult ball = run_job(dir, blade_job("tool: {shape: general, end: ball}\n"));
+  const pipeline::FittedPatch& b = ball.fit.fitted.patches.at(0);
+  REQUIRE(b.end_points == 16);
+  CHECK(b.profile_mm.front().y() == 0);
+  CHECK(b.assembly.cutter.front() == Eigen::Vector2d(0, 0));
+  CHECK(b.assembly.validate().empty());
+  CHECK(b.end_radius_mm > 0.5 * b.profile_mm[16].y());
+  MESSAGE("ball radius " << b.end_radius_mm << " mm on a tip radius " << b.profile_mm[16].y() << " mm; coverage " << b.fit.coverage);
+  CHECK(!ball.programs.empty());
+}
+
 TEST_CASE("depth_cuts: 3 makes three sections of the patch's program, the tip 2/3 and 1/3 of the cutting length higher, the deepest last") {
   test::ScratchDir dir("depth-cuts");
   const pipeline::RunResult run = run_job(dir, blade_job("tool: {shape: cone}\ndepth_cuts: 3\n"));

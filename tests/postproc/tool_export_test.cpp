@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "core/tool_end.h"
+#include "postproc/verify.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -115,6 +116,14 @@ TEST_CASE("tool files with the end: the ball's DXF profile starts on the axis, t
   CHECK(bull_lines.front().p == Eigen::Vector2d(0, 0));
   CHECK((bull_lines.front().q - Eigen::Vector2d(0, 3)).norm() < 1e-6);  // the tip face keeps r 5 - 2
   for (size_t k = 1; k <= 16; ++k) CHECK((bull_lines[k].q - Eigen::Vector2d(2, 3)).norm() == doctest::Approx(2).epsilon(1e-6));
+  // The checks' cutter from a ball profile whose tip plane lies a little above z = 0 (a fitted
+  // meridian's first point): one point on the axis at the tip, then the arc.
+  std::vector<Eigen::Vector2d> lifted = ball.profile;
+  for (Eigen::Vector2d& q : lifted) q.x() += 0.05;
+  const ToolAssembly a = assembly_from_meridian(lifted, ToolAssembly{});
+  CHECK(a.validate().empty());
+  CHECK(a.cutter.front() == Eigen::Vector2d(0, 0));
+  CHECK(a.cutter[1] == lifted[1]);
   const ToolDimensions d = tool_dimensions(ball.profile, ball.end_points);
   CHECK(d.diameter_min_mm == doctest::Approx(10));
   CHECK(d.cone_half_angle_deg == doctest::Approx(0).epsilon(1e-9));
