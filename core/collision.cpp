@@ -26,7 +26,8 @@ double ToolAssembly::total_length() const {
 std::string ToolAssembly::validate() const {
   if (cutter.size() < 2) return "tool profile: at least two points";
   for (size_t j = 0; j < cutter.size(); ++j) {
-    if (!std::isfinite(cutter[j].x()) || !(cutter[j].y() > 0)) return "tool profile: radii must be positive";
+    if (!std::isfinite(cutter[j].x()) || !(cutter[j].y() > 0 || (j == 0 && cutter[j].y() == 0)))
+      return "tool profile: radii must be positive (only the tip, of a ball end, may be on the axis)";
     if (j > 0 && !(cutter[j].x() > cutter[j - 1].x())) return "tool profile: z must increase";
   }
   if (std::abs(cutter.front().x()) > 1e-9) return "tool profile: must start at the tip (z = 0)";
@@ -95,8 +96,12 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
   // Axial samples. Cutter: spheres spaced so that the dip of their union between samples,
   // h^2 / (8 r), stays below a quarter of the gouge tolerance.
   std::vector<Sample> samples;
-  double rmin = INFINITY;
-  for (const auto& c : tool.cutter) rmin = std::min(rmin, c.y());
+  // (A rounded end's radii fall to the tip's: its small radii are left out of the spacing, and each
+  // sample's reach covers its slab of the profile.)
+  double rmin = INFINITY, rmax = 0;
+  for (const auto& c : tool.cutter) rmax = std::max(rmax, c.y());
+  for (const auto& c : tool.cutter)
+    if (c.y() >= 0.1 * rmax) rmin = std::min(rmin, c.y());
   const double hc = o.slab_mm > 0 ? o.slab_mm : std::sqrt(2 * rmin * o.gouge_tolerance_mm);
   const double hb = o.slab_mm > 0 ? o.slab_mm : std::max(0.5, 2 * o.clearance_mm);
   const double sample_count = std::ceil(L / hc) + std::ceil((total - L) / hb) + 3;  // an upper bound
@@ -106,8 +111,12 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
                                  total, sample_count, o.max_work));
   const int nc = std::max(2, int(std::ceil(L / hc)) + 1);
   for (int k = 0; k < nc; ++k) {
-    const double z = L * k / (nc - 1), r = cutter_radius(tool, z);
-    samples.push_back({z, r + o.gouge_tolerance_mm, true, r});
+    const double z = L * k / (nc - 1), r = cutter_radius(tool, z), half = 0.5 * L / (nc - 1);
+    double r_slab = r;
+    for (double zz : {std::max(0.0, z - half), std::min(L, z + half)}) r_slab = std::max(r_slab, cutter_radius(tool, zz));
+    for (const auto& c : tool.cutter)
+      if (std::abs(c.x() - z) <= half) r_slab = std::max(r_slab, c.y());
+    samples.push_back({z, std::max(r, std::hypot(half, r_slab)) + o.gouge_tolerance_mm, true, r});
   }
   // Shank and holder: samples every h from the cutter's end to the holder's end (both included),
   // each covering the half slabs on both sides with the ball around it.

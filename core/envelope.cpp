@@ -84,7 +84,7 @@ EnvelopePoint envelope_point(const Eigen::Vector3d& c, const Eigen::Vector3d& c_
 }
 
 EnvelopeGrid envelope_grid(const LineMotion& m, const RadiusProfile& profile, int n_s, int n_t, int sheet, double t0,
-                           double t1) {
+                           double t1, double s0) {
   if (n_s < 2 || n_t < 2) throw InputError("envelope grid: at least 2 x 2 samples");
   EnvelopeGrid g;
   g.n_s = n_s;
@@ -97,7 +97,7 @@ EnvelopeGrid envelope_grid(const LineMotion& m, const RadiusProfile& profile, in
     const double t = t0 + (t1 - t0) * i / (n_t - 1);
     const Eigen::Vector3d a = m.a(t), b = m.b(t), da = m.da(t), db = m.db(t);
     for (int j = 0; j < n_s; ++j) {
-      const double s = double(j) / (n_s - 1);
+      const double s = s0 + (1 - s0) * j / (n_s - 1);
       const EnvelopePoint p = envelope_point((1 - s) * a + s * b, b - a, (1 - s) * da + s * db, profile.d(s),
                                              profile.d_s(s), sheet);
       const size_t k = size_t(i) * n_s + j;

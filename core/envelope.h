@@ -52,9 +52,10 @@ struct EnvelopeGrid {
   int invalid_points = 0;
   int folded_triangles = 0;            // faces whose normal disagrees with the sphere normal (sheet folds)
 };
-// Samples the envelope on a uniform (t, s) grid. Faces touching an invalid point are left out.
+// Samples the envelope on a uniform (t, s) grid over [t0, t1] x [s0, 1]. Faces touching an invalid
+// point are left out. s0 > 0: the side above a rounded tool end (core/tool_end.h).
 [[nodiscard]] EnvelopeGrid envelope_grid(const LineMotion& motion, const RadiusProfile& profile, int n_s, int n_t,
-                                         int sheet, double t0 = 0.0, double t1 = 1.0);
+                                         int sheet, double t0 = 0.0, double t1 = 1.0, double s0 = 0.0);
 
 // Analytic motions for ground truth, all rigid (|b - a| = length), mm.
 struct AnalyticMotionOptions {

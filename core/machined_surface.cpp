@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <limits>
+#include <tuple>
 
 #include "core/errors.h"
 
@@ -9,8 +10,76 @@ namespace flankcam {
 
 std::string MachinedSurfaceOptions::validate() const {
   if (grid_s < 2 || grid_t < 2) return "envelope grid: at least 2 x 2";
+  if (end && end->kind == EndKind::Corner && !(end->corner_radius > 0)) return "tool end: the corner radius must be > 0";
   return {};
 }
+
+namespace {
+
+// The tool's end swept along the motion: per Φ vertex the signed distance to the swept end (> 0
+// outside the tool: material left), minimised over the poses t_i and refined by golden section
+// between the neighbours of the best one. A vertex whose best pose is the first or the last, or
+// whose nearest point of the end is where the side takes over, is not machined by the end.
+void sweep_end(const SurfaceIndex& design, const Rails& rails, const EndProfile& end, int n_t, MachinedSurface& out) {
+  const auto pose = [&](double t) {
+    const Eigen::Vector3d a = rails.a.point(t), b = rails.b.point(t);
+    return std::pair<Eigen::Vector3d, Eigen::Vector3d>(a, (b - a).normalized());
+  };
+  std::vector<Eigen::Vector3d> tips(static_cast<size_t>(n_t)), axes(static_cast<size_t>(n_t));
+  for (int i = 0; i < n_t; ++i) std::tie(tips[size_t(i)], axes[size_t(i)]) = pose(double(i) / (n_t - 1));
+  // Vertices farther than this from the tip's axis point cannot be nearer the end than its size.
+  const Eigen::Vector2d top = end.profile[size_t(end.end_points)] - Eigen::Vector2d(end.tip_z, 0);
+  const double reach = 3 * top.norm() + 2 * std::abs(end.tip_z);
+  const auto at = [&](const Eigen::Vector3d& x, const Eigen::Vector3d& tip, const Eigen::Vector3d& axis) {
+    const Eigen::Vector3d d = x - tip;
+    const double z = d.dot(axis);
+    return end_distance(end, z, (d - z * axis).norm());
+  };
+  const auto& V = design.mesh().vertices;
+  out.design_by_end.assign(V.size(), 0);
+#pragma omp parallel for schedule(dynamic, 256)
+  for (int v = 0; v < int(V.size()); ++v) {
+    const Eigen::Vector3d& x = V[size_t(v)];
+    int best = -1, best_inner = -1;
+    double best_d = INFINITY, best_inner_d = INFINITY;
+    for (int i = 0; i < n_t; ++i) {
+      if ((x - tips[size_t(i)]).squaredNorm() > reach * reach) continue;
+      const double d = at(x, tips[size_t(i)], axes[size_t(i)]).distance;
+      if (d < best_d) best_d = d, best = i;
+      if (i > 0 && i < n_t - 1 && d < best_inner_d) best_inner_d = d, best_inner = i;
+    }
+    // A flat face over a floor is as near at many poses: an inner pose as near as the end one counts.
+    if ((best == 0 || best == n_t - 1) && best_inner >= 0 && best_inner_d <= best_d + 1e-9 * (1 + std::abs(best_d)))
+      best = best_inner, best_d = best_inner_d;
+    if (best <= 0 || best >= n_t - 1) continue;  // not reached, or beyond the motion's ends
+    double lo = double(best - 1) / (n_t - 1), hi = double(best + 1) / (n_t - 1);
+    const double g = 0.5 * (std::sqrt(5.0) - 1);
+    const auto f = [&](double t) {
+      const auto [tip, axis] = pose(t);
+      return at(x, tip, axis).distance;
+    };
+    double t1 = hi - g * (hi - lo), t2 = lo + g * (hi - lo), f1 = f(t1), f2 = f(t2);
+    for (int k = 0; k < 40; ++k) {
+      if (f1 <= f2) {
+        hi = t2, t2 = t1, f2 = f1, t1 = hi - g * (hi - lo), f1 = f(t1);
+      } else {
+        lo = t1, t1 = t2, f1 = f2, t2 = lo + g * (hi - lo), f2 = f(t2);
+      }
+    }
+    const auto [tip, axis] = pose(0.5 * (lo + hi));
+    const EndDistance e = at(x, tip, axis);
+    const double d = std::min(e.distance, best_d);
+    if (!e.reached && !at(x, tips[size_t(best)], axes[size_t(best)]).reached) continue;
+    double& dev = out.design_deviation[size_t(v)];
+    if (!std::isfinite(dev) || d < dev) {
+      dev = d;
+      out.design_row[size_t(v)] = best;
+      out.design_by_end[size_t(v)] = 1;
+    }
+  }
+}
+
+}  // namespace
 
 int tool_side(const SurfaceIndex& design, const Rails& rails) {
   std::vector<Eigen::Vector3d> pts;
@@ -45,7 +114,9 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
       }
     }
   }
-  out.omega = envelope_grid(motion, profile, o.grid_s, o.grid_t, out.sheet);
+  std::optional<EndProfile> end;
+  if (o.end) end = end_profile(meridian(tool, rails.length, 121), *o.end);
+  out.omega = envelope_grid(motion, profile, o.grid_s, o.grid_t, out.sheet, 0.0, 1.0, end ? end->side_s : 0.0);
   out.tool_side = tool_side(design, rails);
   const double nan = std::numeric_limits<double>::quiet_NaN();
 
@@ -58,7 +129,11 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
   }
   out.design_deviation.assign(design.mesh().vertices.size(), nan);
   out.design_row.assign(design.mesh().vertices.size(), -1);
-  if (out.omega.mesh.faces.empty()) return out;
+  out.design_by_end.assign(design.mesh().vertices.size(), 0);
+  if (out.omega.mesh.faces.empty()) {
+    if (end) sweep_end(design, rails, *end, o.grid_t, out);
+    return out;
+  }
   const SurfaceIndex omega_index(out.omega.mesh);
   const auto on_omega = omega_index.closest(design.mesh().vertices);
   const auto& normals = design.normals();
@@ -67,6 +142,7 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
     out.design_deviation[v] = (on_omega[v].point - design.mesh().vertices[v]).dot(out.tool_side * normals[v]);
     out.design_row[v] = out.omega.mesh.faces[size_t(on_omega[v].face)][0] / out.omega.n_s;
   }
+  if (end) sweep_end(design, rails, *end, o.grid_t, out);
   return out;
 }
 

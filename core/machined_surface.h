@@ -1,16 +1,22 @@
 // The surface a fitted motion really machines: the envelope Ω of the tool of revolution
 // under the fitted rails, and its signed deviation from the design surface Φ.
 #pragma once
+#include <optional>
 #include <vector>
 
 #include "core/closest_point.h"
 #include "core/envelope.h"
 #include "core/fitting.h"
+#include "core/tool_end.h"
 
 namespace flankcam {
 
 struct MachinedSurfaceOptions {
-  int grid_s = 60, grid_t = 300;  // tessellation of Ω over (s, t)
+  int grid_s = 60, grid_t = 300;  // tessellation of Ω over (s, t); grid_t poses for the tool's end
+  // The tool's end at the tip (core/tool_end.h; corner radius in the rails' frame). Unset: the side
+  // envelope alone, as the fit models it. Set: Ω is the side above the end (s >= the end's
+  // tangent point), and the end's sweep (tip face, torus, ball) joins it in the deviation of Φ.
+  std::optional<ToolEnd> end;
   std::string validate() const;
 };
 
@@ -23,6 +29,7 @@ struct MachinedSurface {
   std::vector<double> design_deviation;   // per Φ vertex: the same measured from Ω; NaN where Ω does
                                           // not cover the vertex
   std::vector<int> design_row;            // per Φ vertex: the Ω grid row (t index) of its closest point; -1: none
+  std::vector<char> design_by_end;        // per Φ vertex: 1 where the tool's end, not its side, machines it
 };
 
 // Deviations are in the frame of `design` (unit frame in the fitting).

@@ -16,6 +16,7 @@
 #include "postproc/apt.h"
 #include "postproc/report_svg.h"
 #include "postproc/tool_export.h"
+#include "postproc/verify.h"
 
 namespace flankcam::pipeline {
 
@@ -172,7 +173,12 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
     const FitResult& r = p.fit.fit;
     p.poses = poses_mm(job, f.frame, r.rails);
     p.assembly = assembly_of(job, f.frame, r);
-    p.profile_mm = tool_profile_mm(f.frame, r);
+    // tool.end: the profile ends in it, and a rounded end is the cutter the check sees (tool_end.h).
+    const EndProfile end = end_profile(tool_profile_mm(f.frame, r), job.tool.end);
+    p.profile_mm = end.profile;
+    p.end_points = end.end_points;
+    p.end_radius_mm = end.radius;
+    if (job.tool.end.kind != EndKind::Flat) p.assembly = assembly_from_meridian(end.profile, p.assembly);
     const double half = 0.5 * p.assembly.cutter_length();
     p.contacts.clear();
     for (const ToolPose& q : p.poses) p.contacts.push_back(design.closest(q.tip + half * q.axis).point);
@@ -416,6 +422,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     PatchOptions o;
     o.fit = fit_options();
     o.tolerance = out.frame.length_to_unit(job.tolerance_mm);
+    o.machined.end = ToolEnd{job.tool.end.kind, out.frame.length_to_unit(job.tool.end.corner_radius), out.frame.length_to_mm(1.0)};
     o.on_stage = [&](const std::string& s) { progress(fmt::format("patch {}: {}", p.name, s)); };
     o.fit.on_iteration = [&](int it, double objective) {
       progress(fmt::format("patch {}: iteration {}, F_motion {:.3e}", p.name, it, objective));
@@ -551,12 +558,13 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
   const double L = fr.length_to_mm(r.rails.length);
   nlohmann::ordered_json tool;
   tool["shape"] = to_string(r.tool.shape);
+  tool["end"] = {{"kind", to_string(job.tool.end.kind)}, {"radius_mm", round_mm(p.end_radius_mm)}};  // tool.end
   tool["length"] = round_mm(L);
   auto& profile = tool["profile"] = nlohmann::ordered_json::array();
   const std::vector<Eigen::Vector2d>& meridian_mm = p.profile_mm;
   for (const Eigen::Vector2d& zr : meridian_mm) profile.push_back({round_mm(zr.x()), round_mm(zr.y())});
   tool["profile_note"] = "meridian [z, r] in mm, z along the axis from the tool tip end (a) towards b";
-  const ToolDimensions dims = tool_dimensions(meridian_mm);
+  const ToolDimensions dims = tool_dimensions(meridian_mm, p.end_points);
   tool["diameter_min"] = round_mm(dims.diameter_min_mm);
   tool["diameter_max"] = round_mm(dims.diameter_max_mm);
   // The cone of the meridian itself: spheres d(z) = d0 + k z envelope a cone of half angle asin(k).
@@ -666,7 +674,7 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
 
 std::string tool_sheet(const Job& job, const FittedPatch& p) {
   const std::vector<Eigen::Vector2d>& zr = p.profile_mm;
-  const ToolDimensions dims = tool_dimensions(zr);
+  const ToolDimensions dims = tool_dimensions(zr, p.end_points);
   const std::string& name = p.job->name;
   const auto angle = [&](size_t i) {  // local half angle of the meridian, deg (positive: widening towards the shank)
     const size_t a = i == 0 ? 0 : i - 1, b = std::min(zr.size() - 1, i + 1);
@@ -678,6 +686,8 @@ std::string tool_sheet(const Job& job, const FittedPatch& p) {
                                 to_string(p.fit.fit.tool.shape), job.tool.shared ? ", shared by every patch" : "");
   out += "# z from the tip along the axis, r the radius of the flank; grind to the profile within the tolerance\n";
   out += fmt::format("tolerance_mm,{}\n", fixed(job.tolerance_mm, 6));
+  if (job.tool.end.kind != EndKind::Flat)  // tool.end: the arc's radius (the ball's is the fitted tool's)
+    out += fmt::format("end_{}_radius_mm,{}\n", to_string(job.tool.end.kind), fixed(p.end_radius_mm, 4));
   out += fmt::format("cutting_length_mm,{}\n", fixed(dims.length_mm, 4));
   out += fmt::format("tip_diameter_mm,{}\n", fixed(2 * zr.front().y(), 4));
   out += fmt::format("end_diameter_mm,{}\n", fixed(2 * zr.back().y(), 4));
@@ -695,6 +705,7 @@ ClProgram pass_program(const Job& job, const FittedJob& f, const FittedPatch& p,
   ClProgram cl = flank_program(p.job->name, pm.poses, p.profile_mm, job.feed_mm_min, job.spindle_rpm, job.lead_in_mm,
                                job.retract_mm);
   cl.tool = tool;
+  cl.cutter = enveloping_cutter(p.profile_mm, p.end_points, p.end_radius_mm);  // tool.end: the corner in CUTTER
   const size_t first = job.lead_in_mm < job.retract_mm ? 2 : 1;
   for (size_t i = 0; i < pm.poses.size(); ++i) cl.moves[first + i].contact = pm.contacts[i];
   cl.comments.push_back(fmt::format("FLANKCAM PASS WITH ALLOWANCE {} MM ON {}, EPS {:.4f} MM", pm.allowance_mm,
@@ -707,6 +718,7 @@ ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p
   ClProgram cl = flank_program(p.job->name, p.poses, p.profile_mm, job.feed_mm_min, job.spindle_rpm, job.lead_in_mm,
                                job.retract_mm);
   cl.tool = tool;
+  cl.cutter = enveloping_cutter(p.profile_mm, p.end_points, p.end_radius_mm);  // tool.end: the corner in CUTTER
   const size_t first = job.lead_in_mm < job.retract_mm ? 2 : 1;  // flank_program: clearance, lead-in, then the pass
   for (size_t i = 0; i < p.poses.size(); ++i) cl.moves[first + i].contact = p.contacts[i];
   cl.comments.push_back(fmt::format("FLANKCAM FIT OF {}, EPS {:.4f} MM, TOLERANCE {} MM", job.surface.filename().string(),

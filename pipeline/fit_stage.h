@@ -38,7 +38,9 @@ struct FittedPatch {
   PatchFit fit;                  // unit frame
   std::vector<ToolPose> poses;   // the fitted motion at its samples t_i, mm, part coordinates
   ToolAssembly assembly;         // cutter spheres from the fit, shank and holder from the job, mm
-  std::vector<Eigen::Vector2d> profile_mm;  // the tool's meridian (z, r) from the tip, mm
+  std::vector<Eigen::Vector2d> profile_mm;  // the tool's meridian (z, r) from the tip with its end (tool.end), mm
+  int end_points = 0;                       // profile_mm[0, end_points): the rounded end's arc (core/tool_end.h)
+  double end_radius_mm = 0;                 // that arc's radius (0: flat end)
   std::vector<Eigen::Vector3d> contacts;    // per pose: the design surface nearest the middle of the cutter, mm
   CollisionReport collisions;    // against the whole part
   std::optional<CustomComparison> custom;  // catalogue jobs only

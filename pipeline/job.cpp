@@ -135,11 +135,28 @@ void read_post(const Reader& r, const YAML::Node& p, PostJob& post) {
   if (p["safe_height"]) post.safe_height_mm = in_range(r, p["safe_height"], "post.safe_height", 0, max_length_mm, "mm");
 }
 
+// tool.end: flat | ball | {corner: R} (mm).
+ToolEnd read_end(const Reader& r, const YAML::Node& e) {
+  const char* expected = "expected flat, ball or {corner: R} (R in mm)";
+  if (e.IsScalar()) {
+    if (e.Scalar() == "flat") return {};
+    if (e.Scalar() == "ball") return {EndKind::Ball, 0, 1};
+    if (e.Scalar() == "corner") r.fail(e, "tool.end", "corner needs its radius: {corner: R} (mm)");
+    r.fail(e, "tool.end", fmt::format("unknown end '{}': {}", e.Scalar(), expected));
+  }
+  if (!e.IsMap()) r.fail(e, "tool.end", expected);
+  r.only_keys(e, "tool.end", {"corner"});
+  const YAML::Node c = r.need(e, "corner", "tool.end.corner");
+  const double R = r.positive(c, "tool.end.corner");
+  if (R > max_length_mm) r.fail(c, "tool.end.corner", fmt::format("must be at most {} mm", max_length_mm));
+  return {EndKind::Corner, R, 1};
+}
+
 // tool: {shape, control_points, min_diameter, max_diameter, max_length, min_tip_diameter,
-// max_cone_angle, convex, catalogue, shared}.
+// max_cone_angle, convex, catalogue, shared, end}.
 void read_tool(const Reader& r, const YAML::Node& t, Job& job) {
   r.only_keys(t, "tool", {"shape", "control_points", "min_diameter", "max_diameter", "max_length", "min_tip_diameter",
-                          "max_cone_angle", "convex", "catalogue", "shared"});
+                          "max_cone_angle", "convex", "catalogue", "shared", "end"});
   if (t["shape"]) job.fit.shape = read_shape(r, t["shape"]);
   if (t["control_points"]) job.fit.meridian_control_points = r.integer(t["control_points"], "tool.control_points", 4, max_samples_s);
   ToolJob& tj = job.tool;
@@ -167,6 +184,18 @@ void read_tool(const Reader& r, const YAML::Node& t, Job& job) {
     } catch (const InputError& e) {
       r.fail(c, "tool.catalogue", e.what());
     }
+  }
+  if (const YAML::Node e = t["end"]) {
+    tj.end = read_end(r, e);
+    // A catalogue tool is known now: its corner radius must fit it (a fitted tool's is checked after the fit).
+    if (tj.catalogue && tj.end.kind == EndKind::Corner) try {
+        (void)end_profile(tj.catalogue->meridian_mm(), tj.end);
+      } catch (const InputError& x) {
+        std::string why = x.what();
+        for (const std::string prefix : {"tool.end.corner: ", "tool.end: "})
+          if (why.rfind(prefix, 0) == 0) why = why.substr(prefix.size());
+        r.fail(e["corner"], "tool.end.corner", why);
+      }
   }
 }
 
@@ -222,7 +251,7 @@ Job read_job(const std::filesystem::path& file) {
   const Reader r(name);
   const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
-  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "check_tolerance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post", "allowance", "passes", "overtravel"});
+  r.only_keys(root, "", {"surface", "part", "holder", "clearance", "check_tolerance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post", "allowance", "passes", "overtravel", "depth_cuts"});
 
   Job job;
   job.file = file;
@@ -270,6 +299,7 @@ Job read_job(const std::filesystem::path& file) {
     }
   }
   if (root["overtravel"]) job.overtravel_mm = in_range(r, root["overtravel"], "overtravel", 0, 1000, "mm");
+  if (root["depth_cuts"]) job.depth_cuts = r.integer(root["depth_cuts"], "depth_cuts", 1, 50);
   if (root["tolerance"]) job.tolerance_mm = in_range(r, root["tolerance"], "tolerance", 1e-5, 100, "mm");
   if (const YAML::Node s = root["sampling"]) {
     r.only_keys(s, "sampling", {"s", "t"});

@@ -11,6 +11,7 @@
 
 #include "core/fitting.h"
 #include "core/patch.h"
+#include "core/tool_end.h"
 #include "pipeline/tool_catalogue.h"
 
 namespace flankcam::pipeline {
@@ -62,6 +63,7 @@ struct ToolJob {
   bool convex = false;                                     // no waist
   std::optional<CatalogueTool> catalogue;                  // tool: {catalogue: NAME}
   bool shared = false;                                     // one tool for all patches
+  ToolEnd end;                                             // tool.end: flat (default), ball, {corner: R mm}
   [[nodiscard]] bool constrained() const;
 };
 
@@ -91,6 +93,7 @@ struct Job {
   double allowance_mm = 0;          // stock left on the design surface: the fit's target is Φ offset by it
   std::vector<double> passes_mm;    // passes: [{allowance: A}, ...], in order; empty: one pass at allowance_mm
   double overtravel_mm = 0;         // the motion continued beyond the surface at both ends
+  int depth_cuts = 1;               // `run`: the flank's height in this many axial levels, the deepest last
   std::vector<PatchJob> patches;   // empty with `patches: auto`
   std::optional<CoverJob> cover;   // set: `patches: auto`
   std::string machine;  // `run`: a machine file (relative to the job file) or a name in machines/

@@ -73,7 +73,9 @@ std::vector<std::string> write_patch_files(OutputDir& out, const Job& job, const
     if (what.apt)
       write_apt(out.file(name + ".apt"), what.apt_program ? *what.apt_program : *what.program), files.push_back(name + ".apt");
     if (what.cl) {
-      write_file_atomically(out.file(name + "-cl.csv"), [&](std::ostream& o) { o << cl_csv(*what.program); });
+      // The CSV holds what NAME.apt holds: every pass and depth level in order.
+      write_file_atomically(out.file(name + "-cl.csv"),
+                            [&](std::ostream& o) { o << cl_csv(what.apt_program ? *what.apt_program : *what.program); });
       files.push_back(name + "-cl.csv");
     }
   }

@@ -51,6 +51,58 @@ ClProgram all_passes(const std::vector<ClProgram>& passes) {
   return all;
 }
 
+// depth_cuts: level k of n (k = 1 .. n) of one pass. The flank's height is the cutter's length H
+// (the fitted tool spans the flank from its tip to H); level k stands (n - k) H / n higher along the
+// tool axis, so it cuts the top k/n of the flank and the last level, the fitted motion itself, the
+// full depth. Lifted along its axis the tool's side at a flank height z is its radius at z - Δ:
+// a tool that narrows away from the tip would cut into the flank there, so the level is also moved
+// off the surface (along the contact normal, perpendicular to the axis) by the largest such gain
+// (0 for cylinders and tools widening towards the shank, which leave Δ tan(α) of stock instead).
+ClProgram depth_level(const ClProgram& pass, const FittedPatch& p, int level, int levels, const SurfaceIndex& design) {
+  if (level == levels && levels == 1) return pass;
+  const std::vector<Eigen::Vector2d>& zr = p.profile_mm;
+  const auto r_at = [&](double z) {
+    if (z <= zr.front().x()) return zr.front().y();
+    if (z >= zr.back().x()) return zr.back().y();
+    const auto it = std::upper_bound(zr.begin(), zr.end(), z, [](double v, const Eigen::Vector2d& q) { return v < q.x(); });
+    const Eigen::Vector2d &a = *(it - 1), &b = *it;
+    return a.y() + (b.y() - a.y()) * (z - a.x()) / (b.x() - a.x());
+  };
+  const double H = p.assembly.cutter_length(), lift = H * (levels - level) / levels;
+  double off = 0;
+  for (int k = 0; k <= 200 && lift > 0; ++k) {
+    const double z = (H - lift) * k / 200;
+    off = std::max(off, r_at(z) - r_at(z + lift));
+  }
+  ClProgram out = pass;
+  out.comments.push_back(off > 0 ? fmt::format("FLANKCAM DEPTH CUT {} OF {}: TIP {:.4f} MM ABOVE FULL DEPTH, {:.4f} MM OFF THE SURFACE",
+                                               level, levels, lift, off)
+                                 : fmt::format("FLANKCAM DEPTH CUT {} OF {}: TIP {:.4f} MM ABOVE FULL DEPTH", level, levels, lift));
+  // The contact normal per move (from the design surface to the axis); moves without a contact
+  // (approach, retract) take the nearest one's.
+  std::vector<Eigen::Vector3d> normal(out.moves.size(), Eigen::Vector3d::Zero());
+  for (size_t i = 0; i < out.moves.size(); ++i) {
+    const ClMove& m = out.moves[i];
+    if (!m.contact.allFinite()) continue;
+    const Eigen::Vector3d e = m.pose.axis.normalized();
+    Eigen::Vector3d w = m.pose.tip + 0.5 * H * e - m.contact;
+    w -= w.dot(e) * e;
+    if (w.norm() > 1e-12) normal[i] = w.normalized();
+  }
+  for (size_t i = 1; i < normal.size(); ++i)
+    if (normal[i].isZero()) normal[i] = normal[i - 1];
+  for (size_t i = normal.size(); i-- > 1;)
+    if (normal[i - 1].isZero()) normal[i - 1] = normal[i];
+  for (size_t i = 0; i < out.moves.size(); ++i) {
+    ClMove& m = out.moves[i];
+    const Eigen::Vector3d e = m.pose.axis.normalized();
+    m.pose.tip += lift * e + off * normal[i];
+    // The contact: the design surface nearest the middle of the engaged part of the cutter.
+    if (m.contact.allFinite()) m.contact = design.closest(m.pose.tip + 0.5 * (H - lift) * e).point;
+  }
+  return out;
+}
+
 void check_options(const RunOptions& o) {
   if (auto err = o.validate(); !err.empty()) throw InputError(err);
 }
@@ -231,16 +283,22 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
   // an unreachable pose ends the run with nothing half done.
   std::vector<PostInput> inputs;  // work coordinates
   r.posted_cl.resize(r.fit.fitted.patches.size());
+  std::optional<SurfaceIndex> design;  // depth_cuts: the contacts of the levels (part coordinates, mm)
+  if (j.depth_cuts > 1) design.emplace(r.fit.fitted.surface.mesh);
   for (size_t k = 0; k < r.fit.fitted.patches.size(); ++k) {
     const FittedPatch& p = r.fit.fitted.patches[k];
     r.tool_length_mm.push_back(tool_length(j, p));
     if (!r.fit.cl_data[k]) continue;
     ToolAssembly assembly = p.assembly;  // the program's cutter is the tool's meridian
     assembly.cutter = p.profile_mm;
-    // passes: each its own section of the patch's program, in order, the last pass being the fit.
-    std::vector<ClProgram> sections;
-    for (const PassMotion& pm : p.earlier_passes) sections.push_back(pass_program(j, r.fit.fitted, p, pm, r.fit.cl_data[k]->tool));
-    sections.push_back(*r.fit.cl_data[k]);
+    // passes: each its own section of the patch's program, in order, the last pass being the fit;
+    // depth_cuts: within each pass its levels, the deepest last (passes outer, levels inner).
+    std::vector<ClProgram> passes, sections;
+    for (const PassMotion& pm : p.earlier_passes) passes.push_back(pass_program(j, r.fit.fitted, p, pm, r.fit.cl_data[k]->tool));
+    passes.push_back(*r.fit.cl_data[k]);
+    for (const ClProgram& pass : passes)
+      for (int level = 1; level <= j.depth_cuts; ++level)
+        sections.push_back(j.depth_cuts == 1 ? pass : depth_level(pass, p, level, j.depth_cuts, *design));
     r.posted_cl[k] = all_passes(sections);
     for (ClProgram& work : sections) {
       for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);

@@ -16,8 +16,10 @@
 
 namespace flankcam {
 
-AptCutter enveloping_cutter(const std::vector<Eigen::Vector2d>& p) {
-  if (p.size() < 2) throw InputError("tool profile: at least two points");
+AptCutter enveloping_cutter(const std::vector<Eigen::Vector2d>& all, int end_points, double end_radius) {
+  if (all.size() < 2) throw InputError("tool profile: at least two points");
+  if (end_points < 0 || size_t(end_points) + 2 > all.size()) throw InputError("tool profile: the end leaves no side");
+  const std::vector<Eigen::Vector2d> p(all.begin() + end_points, all.end());  // the side
   const double z0 = p.front().x(), z1 = p.back().x();
   const double slope = (p.back().y() - p.front().y()) / (z1 - z0);
   double lift = 0;  // how far the profile bulges above the end-to-end cone
@@ -27,6 +29,11 @@ AptCutter enveloping_cutter(const std::vector<Eigen::Vector2d>& p) {
   c.d = 2 * r_tip;
   c.beta_deg = std::atan(slope) * 180 / M_PI + 0.0;
   c.h = z1;
+  if (end_points > 0) {  // the corner circle: tangent to the tip plane at all.front()'s height
+    c.r = end_radius;
+    c.e = all.front().y();
+    c.f = all.front().x() + end_radius;
+  }
   return c;
 }
 

@@ -17,8 +17,11 @@ struct AptCutter {
   double d = 0, r = 0, e = 0, f = 0, alpha_deg = 0, beta_deg = 0, h = 0;
 };
 // The APT-7 cone that envelopes a meridian (z, r) from the tip: exact for cones and cylinders,
-// the smallest enclosing cone with the profile's end slope for a general tool.
-[[nodiscard]] AptCutter enveloping_cutter(const std::vector<Eigen::Vector2d>& profile);
+// the smallest enclosing cone with the profile's end slope for a general tool. A rounded end
+// (core/tool_end.h: the profile's first `end_points` points, an arc of `end_radius`): the cone is
+// the side's, r the corner radius, e and f the corner centre's radial and axial position.
+[[nodiscard]] AptCutter enveloping_cutter(const std::vector<Eigen::Vector2d>& profile, int end_points = 0,
+                                          double end_radius = 0);
 
 struct ClMove {
   ToolPose pose;

@@ -11,16 +11,18 @@
 
 namespace flankcam {
 
-ToolDimensions tool_dimensions(const std::vector<Eigen::Vector2d>& p) {
+ToolDimensions tool_dimensions(const std::vector<Eigen::Vector2d>& p, int end_points) {
   if (p.size() < 2) throw InputError("tool profile: at least two points");
+  if (end_points < 0 || size_t(end_points) + 2 > p.size()) throw InputError("tool profile: the end leaves no side");
   ToolDimensions d;
   d.length_mm = p.back().x() - std::min(0.0, p.front().x());
   d.diameter_min_mm = INFINITY;
-  for (const auto& q : p) {
-    d.diameter_min_mm = std::min(d.diameter_min_mm, 2 * q.y());
-    d.diameter_max_mm = std::max(d.diameter_max_mm, 2 * q.y());
+  for (size_t k = size_t(end_points); k < p.size(); ++k) {
+    d.diameter_min_mm = std::min(d.diameter_min_mm, 2 * p[k].y());
+    d.diameter_max_mm = std::max(d.diameter_max_mm, 2 * p[k].y());
   }
-  d.cone_half_angle_deg = std::atan2(p.back().y() - p.front().y(), p.back().x() - p.front().x()) * 180 / M_PI + 0.0;
+  const Eigen::Vector2d& side = p[size_t(end_points)];
+  d.cone_half_angle_deg = std::atan2(p.back().y() - side.y(), p.back().x() - side.x()) * 180 / M_PI + 0.0;
   return d;
 }
 
@@ -39,7 +41,7 @@ std::string tool_dxf(const std::vector<Eigen::Vector2d>& p, const std::string& t
   fmt::format_to(o, "0\nSECTION\n2\nHEADER\n9\n$ACADVER\n1\nAC1009\n9\n$MEASUREMENT\n70\n1\n0\nENDSEC\n");
   fmt::format_to(o, "0\nSECTION\n2\nENTITIES\n");
   const Eigen::Vector2d start(p.front().x(), 0), end(p.back().x(), 0);
-  line(b, "PROFILE", start, p.front());
+  if (p.front().y() > 0) line(b, "PROFILE", start, p.front());  // the tip face (a ball's profile starts on the axis)
   for (size_t k = 1; k < p.size(); ++k) line(b, "PROFILE", p[k - 1], p[k]);
   line(b, "PROFILE", p.back(), end);
   line(b, "AXIS", end, start);

@@ -12,11 +12,14 @@ struct ToolDimensions {
   double diameter_min_mm = 0, diameter_max_mm = 0;
   double cone_half_angle_deg = 0;               // from the end diameters; 0 for a cylinder
 };
-// `profile`: meridian points (z, r) in mm from the tip, z increasing.
-[[nodiscard]] ToolDimensions tool_dimensions(const std::vector<Eigen::Vector2d>& profile);
+// `profile`: meridian points (z, r) in mm from the tip, z increasing. `end_points`: the leading
+// points that are a rounded end (core/tool_end.h EndProfile): the diameters and the cone are the
+// side's (from profile[end_points] on), the length the whole tool's.
+[[nodiscard]] ToolDimensions tool_dimensions(const std::vector<Eigen::Vector2d>& profile, int end_points = 0);
 
 // DXF R12 ASCII text: the profile as connected LINE entities on layer PROFILE, closed by the end
 // faces down to the axis and the axis itself on layer AXIS; `title` goes into a comment (999).
+// A rounded end is in the profile itself (its arc as lines, a ball's reaching the axis).
 [[nodiscard]] std::string tool_dxf(const std::vector<Eigen::Vector2d>& profile, const std::string& title);
 void write_tool_dxf(const std::string& path, const std::vector<Eigen::Vector2d>& profile, const std::string& title);
 

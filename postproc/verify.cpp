@@ -84,6 +84,7 @@ ToolAssembly assembly_from_meridian(const std::vector<Eigen::Vector2d>& meridian
   for (const Eigen::Vector2d& zr : meridian)
     if (zr.x() > 1e-9 && (a.cutter.empty() || zr.x() > a.cutter.back().x())) {
       if (a.cutter.empty()) a.cutter.emplace_back(0.0, zr.y());
+      if (a.cutter.size() == 1 && zr.y() == 0) continue;  // a ball end's tip on the axis (core/tool_end.h): once
       a.cutter.push_back(zr);
     } else if (std::abs(zr.x()) <= 1e-9 && a.cutter.empty()) {
       a.cutter.emplace_back(0.0, zr.y());

@@ -90,9 +90,13 @@ TEST_CASE("passes: NAME.apt holds every pass in order, and flankcam verify finds
   REQUIRE(r.code == 0);
   const std::string apt = test::read_text(dir.file("out/blade.apt"));
   const std::string program = test::read_text(dir.file("out/blade.nc"));
-  // Two passes: twice the moves of the last pass's CL CSV (a line a move after two header lines).
-  const int csv_poses = count(test::read_text(dir.file("out/blade-cl.csv")), "\n") - 2;
-  CHECK(count(apt, "GOTO/") >= 2 * csv_poses);
+  // The CL CSV holds both passes like the APT (a line a move after two header lines): twice the
+  // moves of the fit's own CL-data.
+  const int csv_moves = count(test::read_text(dir.file("out/blade-cl.csv")), "\n") - 2;
+  const int csv_feed = count(test::read_text(dir.file("out/blade-cl.csv")), ",feed,");
+  CHECK(count(apt, "GOTO/") >= csv_moves);
+  CHECK(csv_feed % 2 == 0);
+  const int csv_poses = csv_moves / 2;
   const test::RunResult v = test::run_flankcam(
       "verify --job " + dir.file("job.yaml") + " " + dir.file("out/blade.nc") + " --out " + dir.file("verify"), dir);
   CAPTURE(v.err);
@@ -102,4 +106,55 @@ TEST_CASE("passes: NAME.apt holds every pass in order, and flankcam verify finds
   CHECK(cl["off_cl_data"].empty());
   CHECK(int(cl["feed_blocks_compared"]) > 2 * csv_poses * 9 / 10);  // both passes compared
   CHECK(count(program, "M6") == 1);
+}
+
+TEST_CASE("depth_cuts: 3: the program, NAME.apt and NAME-cl.csv hold every level, flankcam verify finds them on the CL-data") {
+  test::ScratchDir dir("depth-cuts-verify");
+  std::string job = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/job-1-patch.yaml");
+  job.replace(job.find("surface: blade.obj"), 18, "surface: " + std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj");
+  job.replace(job.find("post: {dialects: [iso, heidenhain]}"), 35, "post: {dialects: [iso]}");
+  test::write_text(dir.file("one.yaml"), job);
+  test::write_text(dir.file("job.yaml"), job + "depth_cuts: 3\n");
+  const test::RunResult one = test::run_flankcam("run " + dir.file("one.yaml") + " --quiet --out " + dir.file("one"), dir);
+  const test::RunResult r = test::run_flankcam("run " + dir.file("job.yaml") + " --quiet --out " + dir.file("out"), dir);
+  CAPTURE(one.err);
+  CAPTURE(r.err);
+  REQUIRE(one.code == 0);
+  REQUIRE(r.code == 0);
+  const std::string program = test::read_text(dir.file("out/blade.nc"));
+  const int moves = count(test::read_text(dir.file("one/blade-cl.csv")), "\n") - 2;
+  CHECK(count(test::read_text(dir.file("out/blade-cl.csv")), "\n") - 2 == 3 * moves);
+  CHECK(count(test::read_text(dir.file("out/blade.apt")), "GOTO/") == 3 * count(test::read_text(dir.file("one/blade.apt")), "GOTO/"));
+  for (const char* level : {"DEPTH CUT 1 OF 3", "DEPTH CUT 2 OF 3", "DEPTH CUT 3 OF 3"}) CHECK(program.find(level) != std::string::npos);
+  CHECK(count(program, "M6") == 1);
+  const test::RunResult v = test::run_flankcam(
+      "verify --job " + dir.file("job.yaml") + " " + dir.file("out/blade.nc") + " --out " + dir.file("verify"), dir);
+  CAPTURE(v.err);
+  CHECK(v.code == 0);
+  const nlohmann::json report = nlohmann::json::parse(test::read_text(dir.file("verify/verify.json")));
+  const nlohmann::json& cl = report["programs"][0]["cl_data"];
+  CHECK(cl["off_cl_data"].empty());
+  MESSAGE("verify: " << cl["feed_blocks_compared"] << " feed blocks compared with the CL-data of 3 levels (" << moves
+                     << " moves a level)");
+  CHECK(int(cl["feed_blocks_compared"]) > 3 * moves * 9 / 10);  // every level compared
+
+  // Bad values: exit 2, the key and line named, nothing written.
+  std::string bad_end = job;
+  bad_end.replace(bad_end.find("tool: {shape: general}"), 22, "tool: {shape: general, end: {corner: 0}}");
+  const struct {
+    std::string yaml, key;
+  } bad[] = {{job + "depth_cuts: 0\n", ": depth_cuts: "},
+             {job + "depth_cuts: 2.5\n", ": depth_cuts: "},
+             {job + "depth_cuts: 51\n", ": depth_cuts: "},
+             {bad_end, ": tool.end.corner: must be > 0"}};
+  for (const auto& b : bad) {
+    CAPTURE(b.yaml);
+    test::write_text(dir.file("bad.yaml"), b.yaml);
+    const test::RunResult e = test::run_flankcam("run " + dir.file("bad.yaml") + " --quiet --out " + dir.file("bad"), dir);
+    CAPTURE(e.err);
+    CHECK(e.code == 2);
+    CHECK(e.err.find(dir.file("bad.yaml") + ":") != std::string::npos);
+    CHECK(e.err.find(b.key) != std::string::npos);
+    CHECK(!std::filesystem::exists(dir.file("bad/blade.nc")));
+  }
 }

@@ -6,9 +6,8 @@
 #include <map>
 #include <sstream>
 
-#include <map>
-#include <sstream>
-
+#include "core/tool_end.h"
+#include "postproc/verify.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -98,6 +97,60 @@ TEST_CASE("tool STL for simulators: a closed, outward solid with the frustum's v
   const double exact = M_PI * 40 * (36 + 54 + 81) / 3 * n * std::sin(2 * M_PI / n) / (2 * M_PI);
   CHECK(volume == doctest::Approx(exact).epsilon(1e-5));
   // Closed and consistently oriented: every directed edge once, its reverse once.
+  int bad = 0;
+  for (const auto& [e, count] : edges) bad += count != 1 || !edges.count({e.second, e.first});
+  CHECK(bad == 0);
+}
+
+TEST_CASE("tool files with the end: the ball's DXF profile starts on the axis, the corner's runs through its arc, the STL stays closed") {
+  std::vector<Eigen::Vector2d> side;
+  for (int k = 0; k <= 40; ++k) side.emplace_back(0.5 * k, 5.0);  // cylinder r 5, 20 mm
+  const EndProfile ball = end_profile(side, {EndKind::Ball, 0, 1}, 16), bull = end_profile(side, {EndKind::Corner, 2, 1}, 16);
+  std::string version;
+  const auto ball_lines = read_dxf_lines(tool_dxf(ball.profile, "ball"), &version);
+  REQUIRE(ball_lines.size() == ball.profile.size() + 1);  // no tip face: the profile itself leaves the axis
+  CHECK(ball_lines.front().p == Eigen::Vector2d(0, 0));
+  for (size_t k = 0; k < 16; ++k) CHECK((ball_lines[k].q - Eigen::Vector2d(5, 0)).norm() == doctest::Approx(5).epsilon(1e-6));
+  const auto bull_lines = read_dxf_lines(tool_dxf(bull.profile, "corner"), &version);
+  REQUIRE(bull_lines.size() == bull.profile.size() + 2);
+  CHECK(bull_lines.front().p == Eigen::Vector2d(0, 0));
+  CHECK((bull_lines.front().q - Eigen::Vector2d(0, 3)).norm() < 1e-6);  // the tip face keeps r 5 - 2
+  for (size_t k = 1; k <= 16; ++k) CHECK((bull_lines[k].q - Eigen::Vector2d(2, 3)).norm() == doctest::Approx(2).epsilon(1e-6));
+  // The checks' cutter from a ball profile whose tip plane lies a little above z = 0 (a fitted
+  // meridian's first point): one point on the axis at the tip, then the arc.
+  std::vector<Eigen::Vector2d> lifted = ball.profile;
+  for (Eigen::Vector2d& q : lifted) q.x() += 0.05;
+  const ToolAssembly a = assembly_from_meridian(lifted, ToolAssembly{});
+  CHECK(a.validate().empty());
+  CHECK(a.cutter.front() == Eigen::Vector2d(0, 0));
+  CHECK(a.cutter[1] == lifted[1]);
+  const ToolDimensions d = tool_dimensions(ball.profile, ball.end_points);
+  CHECK(d.diameter_min_mm == doctest::Approx(10));
+  CHECK(d.cone_half_angle_deg == doctest::Approx(0).epsilon(1e-9));
+  CHECK(d.length_mm == doctest::Approx(20));
+
+  // STL of the ball-end tool: closed, and its volume the cylinder above the ball plus the half ball
+  // (the 16-segment arc and 180 facets: within 1%).
+  const std::string text = tool_stl(ball.profile, "ball");
+  std::istringstream in(text);
+  std::string word;
+  std::vector<Eigen::Vector3d> v;
+  while (in >> word)
+    if (word == "vertex") {
+      Eigen::Vector3d p;
+      in >> p.x() >> p.y() >> p.z();
+      v.push_back(p);
+    }
+  double volume = 0;
+  std::map<std::pair<std::array<long, 3>, std::array<long, 3>>, int> edges;
+  const auto key = [](const Eigen::Vector3d& p) {
+    return std::array<long, 3>{std::lround(p.x() * 1e5), std::lround(p.y() * 1e5), std::lround(p.z() * 1e5)};
+  };
+  for (size_t f = 0; f < v.size(); f += 3) {
+    volume += v[f].dot(v[f + 1].cross(v[f + 2])) / 6;
+    for (int e = 0; e < 3; ++e) ++edges[{key(v[f + size_t(e)]), key(v[f + size_t((e + 1) % 3)])}];
+  }
+  CHECK(volume == doctest::Approx(M_PI * 25 * 15 + 2.0 / 3 * M_PI * 125).epsilon(1e-2));
   int bad = 0;
   for (const auto& [e, count] : edges) bad += count != 1 || !edges.count({e.second, e.first});
   CHECK(bad == 0);

@@ -1,0 +1,180 @@
+// tool.end and depth_cuts in jobs (issue 15): the keys, the end in every tool file, and depth
+// levels as sections of the program on the bundled blade.
+#include <doctest/doctest.h>
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <string>
+
+#include "core/errors.h"
+#include "core/number_format.h"
+#include "pipeline/run.h"
+#include "postproc/gcode.h"
+#include "postproc/tool_export.h"
+#include "tests/pipeline/job_error.h"
+#include "tests/test_util.h"
+
+using namespace flankcam;
+
+namespace {
+// One patch of the bundled blade (the passes test's), cone tool, iso on xyzbc-head-table.
+std::string blade_job(const std::string& extra) {
+  const std::string ex = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/";
+  return "surface: " + ex + "blade.obj\ntolerance: 0.015\nsampling: {s: 20, t: 60}\n" + extra +
+         "machine: xyzbc-head-table\npost: {dialects: [iso]}\n"
+         "patches:\n  - name: blade\n    init: lines\n    lines:\n"
+         "      - [5.350, 10.342, -1.086, 0.669, 10.353, 60.944]\n"
+         "      - [10.691, 10.006, -1.233, 4.819, 11.629, 60.825]\n"
+         "      - [15.884, 9.359, -1.377, 8.927, 12.621, 60.707]\n";
+}
+
+pipeline::RunResult run_job(const test::ScratchDir& dir, const std::string& yaml) {
+  test::write_text(dir.file("job.yaml"), yaml);
+  pipeline::Job j = pipeline::read_job(dir.file("job.yaml"));
+  const Machine machine = pipeline::check_run(j);
+  return pipeline::run(std::move(j), machine, {});
+}
+}  // namespace
+
+TEST_CASE("tool.end and depth_cuts in a job are checked with file, line and key") {
+  test::ScratchDir dir("tool-end-keys");
+  test::write_text(dir.file("s.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const std::string rest = "surface: s.obj\npatches:\n  - name: p\n    init: line\n    line: [0, 0, 0, 0, 0, 10]\n";
+  const struct {
+    const char* key;
+    const char* expect;
+  } cases[] = {
+      {"tool: {end: round}", ":1: tool.end: unknown end 'round': expected flat, ball or {corner: R}"},
+      {"tool: {end: corner}", ":1: tool.end: corner needs its radius"},
+      {"tool: {end: {corner: -1}}", ":1: tool.end.corner: must be > 0"},
+      {"tool: {end: {corner: x}}", ":1: tool.end.corner: expected a number"},
+      {"tool: {end: {radius: 2}}", ":1: tool.end.radius: unknown key"},
+      {"tool: {end: [1, 2]}", ":1: tool.end: expected flat, ball or {corner: R}"},
+      {"tool: {catalogue: cyl-d6-l20, end: {corner: 4}}", ":1: tool.end.corner: 4.0000 mm is larger than the tool's ball radius 3.0000 mm"},
+      {"depth_cuts: 0", ":1: depth_cuts: expected a whole number in 1..50"},
+      {"depth_cuts: 51", ":1: depth_cuts: expected a whole number in 1..50"},
+      {"depth_cuts: 2.5", ":1: depth_cuts: expected a whole number in 1..50"},
+      {"depth_cuts: many", ":1: depth_cuts: expected a number"},
+  };
+  for (const auto& c : cases) {
+    CAPTURE(c.key);
+    test::write_text(dir.file("job.yaml"), std::string(c.key) + "\n" + rest);
+    const std::string msg = test::job_error(dir.file("job.yaml"));
+    CAPTURE(msg);
+    CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
+  }
+  test::write_text(dir.file("job.yaml"), "tool: {catalogue: cyl-d6-l20, end: {corner: 3}}\ndepth_cuts: 50\n" + rest);
+  const pipeline::Job ok = pipeline::read_job(dir.file("job.yaml"));
+  CHECK(ok.tool.end.kind == EndKind::Corner);
+  CHECK(ok.tool.end.corner_radius == 3);
+  CHECK(ok.depth_cuts == 50);
+  test::write_text(dir.file("job.yaml"), "tool: {end: ball}\n" + rest);
+  CHECK(pipeline::read_job(dir.file("job.yaml")).tool.end.kind == EndKind::Ball);
+  test::write_text(dir.file("job.yaml"), rest);
+  CHECK(pipeline::read_job(dir.file("job.yaml")).tool.end.kind == EndKind::Flat);  // the default
+}
+
+TEST_CASE("a corner end is in the profile, the collision cutter, the grinding sheet, the DXF and the report, and costs the fillet band's coverage") {
+  test::ScratchDir dir("tool-end-corner");
+  const pipeline::RunResult flat = run_job(dir, blade_job("tool: {shape: cone}\n"));
+  const pipeline::RunResult bull = run_job(dir, blade_job("tool: {shape: cone, end: {corner: 1.5}}\n"));
+  const pipeline::FittedPatch &f = flat.fit.fitted.patches.at(0), &b = bull.fit.fitted.patches.at(0);
+  CHECK(f.end_points == 0);
+  REQUIRE(b.end_points == 16);
+  CHECK(b.end_radius_mm == 1.5);
+  // The arc: from the tip plane (z of the flat tool's tip face) to the side, all 1.5 mm from one centre.
+  const Eigen::Vector2d tip = b.profile_mm.front(), tangent = b.profile_mm[16];
+  const Eigen::Vector2d centre(tip.x() + 1.5, tip.y());
+  for (int k = 0; k <= 16; ++k) CHECK((b.profile_mm[size_t(k)] - centre).norm() == doctest::Approx(1.5).epsilon(1e-6));
+  CHECK(tip.y() < tangent.y() - 1.0);  // the tip face shrank by about the corner radius
+  // The collision check's cutter is that profile (from z = 0), the fitted side above it.
+  CHECK(b.assembly.cutter.front().y() < tangent.y() - 0.5);
+  CHECK(b.assembly.cutter.back().y() == doctest::Approx(b.profile_mm.back().y()));
+  // Files: the DXF's profile starts with the tip face down to the axis and runs through the arc.
+  const std::string dxf = tool_dxf(b.profile_mm, "bull");
+  CHECK(dxf.find("10\n" + fixed(tip.x(), 6) + "\n20\n0.000000\n30\n0.0\n11\n" + fixed(tip.x(), 6) + "\n21\n" +
+                 fixed(tip.y(), 6)) != std::string::npos);
+  const std::string sheet = pipeline::tool_sheet(bull.fit.job, b);
+  CHECK(sheet.find("end_corner_radius_mm,1.5000") != std::string::npos);
+  const ToolDimensions df = tool_dimensions(f.profile_mm), db = tool_dimensions(b.profile_mm, b.end_points);
+  CHECK(db.cone_half_angle_deg == doctest::Approx(df.cone_half_angle_deg).epsilon(0.05));
+  const nlohmann::ordered_json report = pipeline::patch_report(bull.fit.job, bull.fit.fitted, b);
+  CHECK(report["tool"]["end"]["kind"] == "corner");
+  CHECK(report["tool"]["end"]["radius_mm"] == 1.5);
+  // The machined surface: the fillet band (height ~R at the flank's bottom) is the torus's, not the flank's.
+  int by_end = 0;
+  for (char e : b.fit.machined.design_by_end) by_end += e;
+  MESSAGE("coverage within 0.015 mm: flat end " << f.fit.coverage << ", corner 1.5 mm " << b.fit.coverage << "; "
+                                                << by_end << " vertices machined by the torus");
+  CHECK(by_end > 0);
+  CHECK(b.fit.coverage <= f.fit.coverage + 1e-9);
+  // APT-7 CUTTER: the corner radius and its centre (e radial, f axial); the flat tool has none.
+  REQUIRE(bull.fit.cl_data.at(0));
+  const AptCutter& cut = bull.fit.cl_data[0]->cutter;
+  CHECK(cut.r == 1.5);
+  CHECK(cut.e == doctest::Approx(tip.y()));
+  CHECK(cut.f == doctest::Approx(tip.x() + 1.5));
+  CHECK(cut.d == doctest::Approx(flat.fit.cl_data.at(0)->cutter.d).epsilon(1e-6));  // the same side cone
+  CHECK(flat.fit.cl_data[0]->cutter.r == 0);
+  // Programs were posted for both (the back-simulation swept the profile with its end).
+  CHECK(!flat.programs.empty());
+  CHECK(!bull.programs.empty());
+}
+
+TEST_CASE("a ball end on the blade's general tool: the checks' cutter starts on the axis, programs are posted") {
+  test::ScratchDir dir("tool-end-ball");
+  const pipeline::RunResult ball = run_job(dir, blade_job("tool: {shape: general, end: ball}\n"));
+  const pipeline::FittedPatch& b = ball.fit.fitted.patches.at(0);
+  REQUIRE(b.end_points == 16);
+  CHECK(b.profile_mm.front().y() == 0);
+  CHECK(b.assembly.cutter.front() == Eigen::Vector2d(0, 0));
+  CHECK(b.assembly.validate().empty());
+  CHECK(b.end_radius_mm > 0.5 * b.profile_mm[16].y());
+  MESSAGE("ball radius " << b.end_radius_mm << " mm on a tip radius " << b.profile_mm[16].y() << " mm; coverage " << b.fit.coverage);
+  CHECK(!ball.programs.empty());
+}
+
+TEST_CASE("depth_cuts: 3 makes three sections of the patch's program, the tip 2/3 and 1/3 of the cutting length higher, the deepest last") {
+  test::ScratchDir dir("depth-cuts");
+  const pipeline::RunResult run = run_job(dir, blade_job("tool: {shape: cone}\ndepth_cuts: 3\n"));
+  const pipeline::FittedPatch& p = run.fit.fitted.patches.at(0);
+  REQUIRE(run.fit.cl_data.at(0));
+  REQUIRE(run.posted_cl.at(0));
+  const ClProgram &final_cl = *run.fit.cl_data[0], &all = *run.posted_cl[0];
+  const size_t n = final_cl.moves.size();
+  REQUIRE(all.moves.size() == 3 * n);
+  const double H = p.assembly.cutter_length();
+  double worst_lift = 0, worst_off = 0;
+  for (int level = 1; level <= 3; ++level) {
+    double off_min = INFINITY, off_max = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const ToolPose &q = all.moves[size_t(level - 1) * n + i].pose, &f = final_cl.moves[i].pose;
+      const Eigen::Vector3d e = f.axis.normalized(), d = q.tip - f.tip;
+      CHECK((q.axis - f.axis).norm() < 1e-12);
+      worst_lift = std::max(worst_lift, std::abs(d.dot(e) - H * (3 - level) / 3.0));
+      const double off = (d - d.dot(e) * e).norm();
+      off_min = std::min(off_min, off), off_max = std::max(off_max, off);
+    }
+    worst_off = std::max(worst_off, off_max - off_min);  // one radial offset per level
+    if (level == 3) CHECK(off_max < 1e-12);             // the last level is the fitted motion
+    MESSAGE("level " << level << ": lift " << H * (3 - level) / 3.0 << " mm, radial offset " << off_max << " mm");
+  }
+  CHECK(worst_lift < 1e-9);
+  CHECK(worst_off < 1e-9);
+  // One program, three sections in order, one tool change.
+  int programs = 0;
+  for (const pipeline::PostedProgram& w : run.programs) {
+    if (w.patch != "blade") continue;
+    ++programs;
+    REQUIRE(w.posted.sections.size() == 3);
+    const std::string text = nc_text(w.posted.program, {w.dialect, false, 0.005});
+    const size_t l1 = text.find("DEPTH CUT 1 OF 3"), l2 = text.find("DEPTH CUT 2 OF 3"), l3 = text.find("DEPTH CUT 3 OF 3");
+    REQUIRE(l1 != std::string::npos);
+    REQUIRE(l2 != std::string::npos);
+    REQUIRE(l3 != std::string::npos);
+    CHECK(l1 < l2);
+    CHECK(l2 < l3);
+  }
+  CHECK(programs == 1);
+}
