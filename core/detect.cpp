@@ -7,6 +7,7 @@
 #include <map>
 #include <numeric>
 #include <tuple>
+#include <array>
 
 #include "core/errors.h"
 
@@ -21,7 +22,13 @@ std::string CoverOptions::validate() const {
   for (double r : radii)
     if (!(r > 0) || !std::isfinite(r)) return "cover.radii: must be positive";
   if (explored_seeds < 1) return "cover.explored_seeds: at least 1";
-  if (fitted_seeds < 1 || fitted_seeds > explored_seeds) return "cover.fitted_seeds: 1 .. explored_seeds";
+  if (refined_seeds < explored_seeds) return "cover.refined_seeds: at least explored_seeds";
+  if (sweep_steps < 2) return "cover.sweep_steps: at least 2";
+  if (!(sweep_step > 0 && sweep_step < 0.1)) return "cover.sweep_step: must be in (0, 0.1)";
+  if (refine_evaluations < 0) return "cover.refine_evaluations: must be >= 0";
+  if (explored_unrefined < 0) return "cover.explored_unrefined: must be >= 0";
+  if (fitted_seeds < 1 || fitted_seeds > explored_seeds + explored_unrefined)
+    return "cover.fitted_seeds: 1 .. explored_seeds + explored_unrefined";
   if (!(band >= 0) || !std::isfinite(band)) return "cover.band: must be >= 0";
   if (lines < 2) return "cover.lines: at least 2";
   if (!(patch.tolerance > 0)) return "tolerance: must be positive";
@@ -93,6 +100,8 @@ struct Seed {
   double F = std::numeric_limits<double>::infinity();
   double rank = std::numeric_limits<double>::infinity();
   int vertex = -1;
+  int side = 0;  // +1: the line lies on the side Φ's normals point to
+  double spread = std::numeric_limits<double>::infinity();  // sweep_spread of the refined line
 };
 
 // Principal directions from the change of the vertex normals over the two-ring (dn = W dx in the
@@ -141,8 +150,9 @@ Principal principal_at(const SurfaceIndex& surface, const std::vector<std::vecto
 
 // Sec. 4.1 over the whole surface: at a seed point, lines around the least-curvature direction,
 // offset along the normal by the candidate radii (and by the radius of curvature towards its
-// centre), each as long as the surface reaches along it; the most movable one.
-Seed best_line_at(const SurfaceIndex& surface, const std::vector<std::vector<int>>& ring, int v, const CoverOptions& o) {
+// centre), each as long as the surface reaches along it; the most movable one on each side of Φ.
+std::array<Seed, 2> best_lines_at(const SurfaceIndex& surface, const std::vector<std::vector<int>>& ring, int v,
+                                  const CoverOptions& o) {
   const Eigen::Vector3d p = surface.mesh().vertices[size_t(v)], n = surface.normals()[size_t(v)];
   Eigen::Index k;
   n.cwiseAbs().minCoeff(&k);
@@ -166,8 +176,10 @@ Seed best_line_at(const SurfaceIndex& surface, const std::vector<std::vector<int
       dirs.push_back(std::cos(phi) * t1 + std::sin(phi) * t2);
     }
   }
-  Seed best;
-  best.vertex = v;
+  std::array<Seed, 2> best;  // per side: -1, +1
+  best[0].vertex = best[1].vertex = v;
+  best[0].side = -1;
+  best[1].side = 1;
   constexpr int reach_samples = 121;  // 0.0125 apart: a line as short as 0.05 of the diagonal is seen
   constexpr double reach = 0.75;  // half-length of the probe line (unit frame)
   const auto u_of = [&](int i) { return -reach + 2 * reach * i / (reach_samples - 1); };
@@ -204,14 +216,113 @@ Seed best_line_at(const SurfaceIndex& surface, const std::vector<std::vector<int
         // Below ~1e-8 (angles ~1e-4 rad) F_l is tessellation noise: among such lines the longest
         // reaches furthest across Φ, so the rank is F_l floored there, per unit length.
         const double rank = std::max(m.F, kMovableF) / (u1 - u0);
-        if (rank < best.rank) {
-          best.rank = rank;
-          best.F = m.F;
-          best.line = line;
+        Seed& b = best[side > 0 ? 1 : 0];
+        if (rank < b.rank) {
+          b.rank = rank;
+          b.F = m.F;
+          b.line = line;
         }
       }
   }
   return best;
+}
+
+// How far a line is from a tool axis: the line is swept a short way in both directions along its best
+// tangential field (Sec. 4.3), and each point along it should keep its distance to Φ (a tool's radius,
+// eq. 8). The RMS over the points of the spread (max - min) of that distance is the score; F_l alone
+// cannot tell offsets apart (on nearly developable envelopes lines at any offset, on either side,
+// have F_l at the tessellation's noise level), the change of the distances over a sweep can.
+// Infinite when the sweep is too short or too few points stay over Φ.
+double sweep_spread(const SurfaceIndex& surface, const AxisLine& l, const CoverOptions& o) {
+  PropagationOptions pr = o.patch.propagation;
+  pr.max_steps = o.sweep_steps;
+  pr.step = o.sweep_step;
+  pr.keep_radii = false;  // the corrector keeps the distances by construction: it would hide the spread
+  const LineTrajectory tr = propagate_line(surface, l.a, l.b, pr);
+  const int positions = int(tr.a.size());
+  constexpr double inf = std::numeric_limits<double>::infinity();
+  if (positions < o.sweep_steps) return inf;
+  constexpr int points = 14;
+  std::vector<Eigen::Vector3d> x;
+  x.reserve(size_t(positions * points));
+  for (int k = 0; k < positions; ++k)
+    for (int j = 1; j <= points; ++j) {
+      const double s = double(j) / (points + 1);
+      x.push_back((1 - s) * tr.a[size_t(k)] + s * tr.b[size_t(k)]);
+    }
+  const std::vector<Footpoint> f = surface.closest(x);
+  double sum = 0;
+  int used = 0;
+  for (int j = 0; j < points; ++j) {
+    double lo = inf, hi = -inf;
+    bool inside = true;
+    for (int k = 0; k < positions && inside; ++k) {
+      const Footpoint& fp = f[size_t(k * points + j)];
+      inside = !fp.on_boundary;
+      const double d = smooth_distance(surface, fp, x[size_t(k * points + j)]);
+      lo = std::min(lo, d);
+      hi = std::max(hi, d);
+    }
+    if (inside) sum += (hi - lo) * (hi - lo), ++used;
+  }
+  return used * 2 >= points ? std::sqrt(sum / used) : inf;
+}
+
+// The seed line moved to the nearest tool axis it can find: the points at 20% and 80% of it are
+// moved along their footpoint normals and across (4 unknowns: offset, tilt and turn of the line),
+// a pattern search on sweep_spread. Seeds place the line at a few candidate radii along the
+// least-curvature direction; the axis of a cone, barrel or spline tool is tilted out of the tangent
+// plane and its radius is none of them, and exploration (Sec. 4.2) reaches only about 0.02.
+Seed refine_seed(const SurfaceIndex& surface, Seed seed, const CoverOptions& o) {
+  const AxisLine l0 = seed.line;
+  const double L = (l0.b - l0.a).norm();
+  const Eigen::Vector3d qa = 0.8 * l0.a + 0.2 * l0.b, qb = 0.2 * l0.a + 0.8 * l0.b;
+  const Footpoint fa = surface.closest(qa), fb = surface.closest(qb);
+  const Eigen::Vector3d e = (l0.b - l0.a) / L;
+  const auto frame = [&](const Footpoint& f) {
+    Eigen::Vector3d n = f.normal - f.normal.dot(e) * e;
+    n = n.norm() > 1e-9 ? Eigen::Vector3d(n.normalized()) : Eigen::Vector3d(e.unitOrthogonal());
+    return std::make_pair(n, Eigen::Vector3d(e.cross(n)));
+  };
+  const auto [na, ta] = frame(fa);
+  const auto [nb, tb] = frame(fb);
+  using X = Eigen::Vector4d;  // normal offset at 20%, at 80%, across at 20%, at 80%
+  const auto line_of = [&](const X& x) {
+    const Eigen::Vector3d pa = qa + x[0] * na + x[2] * ta, pb = qb + x[1] * nb + x[3] * tb;
+    const Eigen::Vector3d mid = 0.5 * (pa + pb), d = (pb - pa).normalized();
+    return AxisLine{mid - 0.5 * L * d, mid + 0.5 * L * d};
+  };
+  X best = X::Zero();
+  double best_score = sweep_spread(surface, l0, o);
+  // Common offset first (the radius is the least known), coarse, then the pattern search.
+  for (int k = -4; k <= 4; ++k) {
+    if (k == 0) continue;
+    const X x(0.01 * k, 0.01 * k, 0, 0);
+    const double sc = sweep_spread(surface, line_of(x), o);
+    if (sc < best_score) best_score = sc, best = x;
+  }
+  double h = 0.005;
+  for (int evals = 0; h >= 0.0005 && evals < o.refine_evaluations;) {
+    X step_best = best;
+    double step_score = best_score;
+    for (int i = 0; i < 4; ++i)
+      for (int sign : {-1, 1}) {
+        X x = best;
+        x[i] += sign * h;
+        const double sc = sweep_spread(surface, line_of(x), o);
+        ++evals;
+        if (sc < step_score) step_score = sc, step_best = x;
+      }
+    if (step_score < best_score) {
+      best = step_best;
+      best_score = step_score;
+    } else {
+      h *= 0.5;
+    }
+  }
+  seed.line = line_of(best);
+  seed.spread = best_score;
+  return seed;
 }
 
 // Seed points: per cell of a grid whose spacing follows Φ's area, the lowest-index vertex that is
@@ -376,19 +487,52 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
     progress.seeds = int(points.size());
     progress.seed = 0;
     report("seeding");
-    std::vector<Seed> seeds(points.size());
+    std::vector<std::array<Seed, 2>> at_point(points.size());
 #pragma omp parallel for schedule(dynamic, 1)
-    for (int k = 0; k < int(points.size()); ++k) seeds[size_t(k)] = best_line_at(surface, ring, points[size_t(k)], o);
-    std::vector<size_t> order(seeds.size());
-    std::iota(order.begin(), order.end(), size_t(0));
-    std::stable_sort(order.begin(), order.end(), [&](size_t x, size_t y) { return seeds[x].rank < seeds[y].rank; });
+    for (int k = 0; k < int(points.size()); ++k) at_point[size_t(k)] = best_lines_at(surface, ring, points[size_t(k)], o);
+    // The best-ranked lines of each side of Φ (which side the tool is on is not known here) are moved
+    // to the nearest axis (refine_seed) and ranked again by how well they keep their distances.
+    std::vector<Seed> seeds;
+    for (int side : {1, -1}) {
+      std::vector<Seed> one;
+      for (const auto& pair : at_point)
+        for (const Seed& sd : pair)
+          if (sd.side == side && std::isfinite(sd.F)) one.push_back(sd);
+      std::stable_sort(one.begin(), one.end(), [](const Seed& x, const Seed& y) { return x.rank < y.rank; });
+      one.resize(std::min(one.size(), size_t((o.refined_seeds + 1) / 2)));
+      seeds.insert(seeds.end(), one.begin(), one.end());
+    }
+    progress.seeds = int(seeds.size());
+    report("refining seed lines");
+#pragma omp parallel for schedule(dynamic, 1)
+    for (int k = 0; k < int(seeds.size()); ++k) seeds[size_t(k)] = refine_seed(surface, seeds[size_t(k)], o);
+    // A longer line reaches further across Φ: the score is the spread per unit length.
+    const auto score = [](const Seed& sd) { return sd.spread / (sd.line.b - sd.line.a).norm(); };
+    std::vector<size_t> by_spread(seeds.size());
+    std::iota(by_spread.begin(), by_spread.end(), size_t(0));
+    std::stable_sort(by_spread.begin(), by_spread.end(), [&](size_t x, size_t y) { return score(seeds[x]) < score(seeds[y]); });
+    // Where the motion is close to a screw (helices) the spread cannot tell lines apart either; the
+    // most movable unrefined lines, explored as in Sec. 4.2, are candidates too. Refined and
+    // unrefined lines take turns.
+    std::vector<Seed> unrefined;
+    for (const auto& pair : at_point)
+      for (const Seed& sd : pair)
+        if (std::isfinite(sd.F)) unrefined.push_back(sd);
+    std::stable_sort(unrefined.begin(), unrefined.end(), [](const Seed& x, const Seed& y) { return x.rank < y.rank; });
+    std::vector<Seed> turns;
+    for (size_t r = 0; r < std::max(by_spread.size(), unrefined.size()); ++r) {
+      if (r < by_spread.size() && int(r) < o.explored_seeds && std::isfinite(seeds[by_spread[r]].spread))
+        turns.push_back(seeds[by_spread[r]]);
+      if (r < unrefined.size() && int(r) < o.explored_unrefined) turns.push_back(unrefined[r]);
+    }
     std::vector<Candidate> candidates;
-    for (size_t r = 0; r < order.size() && int(candidates.size()) < o.explored_seeds; ++r) {
-      const Seed& s = seeds[order[r]];
-      if (!std::isfinite(s.F)) break;
+    for (size_t r = 0; r < turns.size(); ++r) {
+      const Seed& s = turns[r];
       tried[size_t(s.vertex)] = 1;
       progress.seed = int(r) + 1;
+      progress.seeds = int(turns.size());
       report("exploring and propagating");
+      // Refined lines are explored too: the refinement does not look at F_l, exploration does.
       const ExploredLine ex = explore_line(surface, s.line.a, s.line.b, o.patch.exploration);
       const LineTrajectory tr = propagate_line(surface, ex.a, ex.b, o.patch.propagation);
       Candidate c = keep_uncovered(surface, tr, ex.a, covered, area, o);

@@ -19,8 +19,13 @@ struct CoverOptions {
   int seed_points = 48;
   int directions = 5;
   std::vector<double> radii = {0.025, 0.05, 0.09};  // candidate tool radii (unit frame)
-  int explored_seeds = 4;  // best-ranked seeds explored and propagated per patch
-  int fitted_seeds = 2;    // of those, the trajectories sweeping the most uncovered area are fitted
+  int refined_seeds = 8;   // best-ranked seeds (half on each side of Φ) moved to the nearest axis per patch
+  int sweep_steps = 20;    // a seed's short sweep each way (refinement score) ...
+  double sweep_step = 0.002;  // ... in steps of this (unit frame)
+  int refine_evaluations = 48;  // pattern-search sweeps per seed, after the 9 of the offset scan
+  int explored_seeds = 3;  // best refined seeds propagated per patch
+  int explored_unrefined = 3;  // and the most movable unrefined seeds, explored (Sec. 4.2) and propagated
+  int fitted_seeds = 3;    // of those, this many are fitted (in turn, among those sweeping the most uncovered area)
   double band = 0.03;      // overlap into covered area a new patch's trajectory keeps (unit frame, arc length)
   int lines = 8;           // axis lines written per patch (init: lines) to reproduce it
   PatchOptions patch;      // fit, exploration, propagation, machined surface, tolerance

@@ -3,6 +3,7 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include "core/errors.h"
@@ -22,6 +23,19 @@ std::pair<Eigen::Vector3d, Eigen::Vector3d> normal_plane(const Eigen::Vector3d& 
 }
 
 }  // namespace
+
+double smooth_distance(const SurfaceIndex& surface, const Footpoint& f, const Eigen::Vector3d& p) {
+  const auto& corner = surface.mesh().faces[size_t(f.face)];
+  const auto& V = surface.mesh().vertices;
+  const auto& N = surface.normals();
+  double bulge = 0;  // of the smooth surface over the facet, along the normal
+  for (int i = 0; i < 3; ++i)
+    for (int j = i + 1; j < 3; ++j) {
+      const size_t vi = size_t(corner[size_t(i)]), vj = size_t(corner[size_t(j)]);
+      bulge -= 4 * f.barycentric[i] * f.barycentric[j] * (V[vj] - V[vi]).dot(N[vi] - N[vj]) / 8;
+    }
+  return (p - f.point).dot(f.normal) - bulge;
+}
 
 std::string MovabilityOptions::validate() const {
   if (samples < 5) return "samples: at least 5 points on a line";
@@ -207,6 +221,19 @@ Walk walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, Mov
   Walk w;
   const double L = (b - a).norm();
   Eigen::Vector3d previous_vm = Eigen::Vector3d::Zero();
+  double slid = 0;  // how far the line has slid along itself (unit frame): the tool moved with it
+  // The tool's radii at the start: the distance of each sample to Φ (NaN beyond Φ), eq. (8)'s d_j.
+  const int n0 = int(m.footpoints.size());
+  std::vector<double> d0(size_t(n0), std::numeric_limits<double>::quiet_NaN());
+  for (int i = 0; i < n0; ++i)
+    if (!m.footpoints[size_t(i)].on_boundary) d0[size_t(i)] = m.footpoints[size_t(i)].distance;
+  const auto radius_at = [&](double u) {  // u: tool coordinate in [0, 1] from a at the start
+    if (n0 < 2 || !(u >= 0 && u <= 1)) return std::numeric_limits<double>::quiet_NaN();
+    const double x = u * (n0 - 1);
+    const int i = std::min(int(x), n0 - 2);
+    const double f = x - i;
+    return (1 - f) * d0[size_t(i)] + f * d0[size_t(i + 1)];
+  };
   for (int step = 0; step < o.max_steps; ++step) {
     if (step > 0) {
       m = line_movability(surface, a, b, o.movability);
@@ -222,9 +249,11 @@ Walk walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, Mov
         // At most half a step per step: drift towards an s-edge is slow, while crossing a t-edge
         // obliquely must not push the line along itself.
         const double want = 0.5 * (lead - trail) * L / (n - 1);
-        const Eigen::Vector3d shift = std::clamp(want, -0.5 * o.step, 0.5 * o.step) * (b - a) / L;
+        const double slide = std::clamp(want, -0.5 * o.step, 0.5 * o.step);
+        const Eigen::Vector3d shift = slide * (b - a) / L;
         a += shift;
         b += shift;
+        slid += slide;
         m = line_movability(surface, a, b, o.movability);
       }
       if (m.boundary_samples > o.max_boundary_share * o.movability.samples) {
@@ -259,9 +288,51 @@ Walk walk(const SurfaceIndex& surface, Eigen::Vector3d a, Eigen::Vector3d b, Mov
     previous_vm = sign * vm;
     a += o.step * va;
     b += o.step * vb;
-    const Eigen::Vector3d mid = 0.5 * (a + b), e_new = (b - a).normalized();
+    Eigen::Vector3d mid = 0.5 * (a + b), e_new = (b - a).normalized();
     a = mid - 0.5 * L * e_new;  // keep the length L (rigid line)
     b = mid + 0.5 * L * e_new;
+    if (o.keep_radii) {
+      // Corrector: the step along the best field is first order, and on surfaces where several
+      // fields are nearly as movable it wanders off the axis. A rigid tool keeps each axis point's
+      // distance to Φ (eq. 8), so one damped Gauss-Newton step moves the line back to the start's
+      // distances: rows (1 - s) u^T, s u^T for the endpoints, u the unit direction from the footpoint.
+      const int n = o.movability.samples;
+      std::vector<Eigen::Vector3d> pts(static_cast<size_t>(n));
+      for (int i = 0; i < n; ++i) {
+        const double si = double(i) / (n - 1);
+        pts[size_t(i)] = (1 - si) * a + si * b;
+      }
+      const std::vector<Footpoint> f = surface.closest(pts);
+      Eigen::Matrix<double, 6, 6> JtJ = Eigen::Matrix<double, 6, 6>::Zero();
+      Eigen::Matrix<double, 6, 1> Jtr = Eigen::Matrix<double, 6, 1>::Zero();
+      int rows = 0;
+      for (int i = 0; i < n; ++i) {
+        const Footpoint& fp = f[size_t(i)];
+        const double si = double(i) / (n - 1);
+        const double want = radius_at(si + slid / L);
+        if (fp.on_boundary || !std::isfinite(want) || !(fp.distance > 1e-12)) continue;
+        const Eigen::Vector3d u = (pts[size_t(i)] - fp.point) / fp.distance;
+        Eigen::Matrix<double, 6, 1> J;
+        J << (1 - si) * u, si * u;
+        JtJ += J * J.transpose();
+        Jtr += J * (fp.distance - want);
+        ++rows;
+      }
+      if (rows >= 5) {
+        JtJ += 1e-3 * (JtJ.trace() / 6) * Eigen::Matrix<double, 6, 6>::Identity();
+        const Eigen::Matrix<double, 6, 1> x = -JtJ.ldlt().solve(Jtr);
+        // Never more than a step: the corrector must not jump to another sheet.
+        const double scale = std::min(1.0, o.step / std::max(x.head<3>().norm(), x.tail<3>().norm()));
+        if (std::isfinite(scale)) {
+          a += scale * x.head<3>();
+          b += scale * x.tail<3>();
+          mid = 0.5 * (a + b);
+          e_new = (b - a).normalized();
+          a = mid - 0.5 * L * e_new;
+          b = mid + 0.5 * L * e_new;
+        }
+      }
+    }
   }
   return w;
 }

@@ -9,6 +9,13 @@
 
 namespace flankcam {
 
+// Signed distance of p to the smooth surface the mesh samples, along the footpoint's interpolated
+// normal (positive on the side the normal points to): the flat facet's distance corrected by the
+// quadratic bulge of the face through its corners' normals (an edge's midpoint lies off the chord
+// by (v_j - v_i).(n_i - n_j) / 8). Facet distances vary by the chord error (h^2 / 8R) as a point
+// moves over the faces; this removes most of it.
+[[nodiscard]] double smooth_distance(const SurfaceIndex& surface, const Footpoint& f, const Eigen::Vector3d& p);
+
 struct MovabilityOptions {
   int samples = 30;          // n points on the line
   double jump_ratio = 6.0;   // Remark 1: footpoint spacing over line spacing above this is a second branch
@@ -63,6 +70,10 @@ struct PropagationOptions {
   double max_movability = 2e-3;   // stop when F_l exceeds this
   double max_boundary_share = 0.5;  // stop when this share of footpoints lies on the surface boundary
   int max_steps = 5000;           // per direction
+  // After each step, one Gauss-Newton step back to the start line's distances to Φ (a rigid tool's
+  // radii, eq. 8). Not in the paper: without it the line drifts off the axis where F_l has several
+  // near-minimal fields (spline tools, s-shaped motions).
+  bool keep_radii = true;
   std::string validate() const;
 };
 
