@@ -60,6 +60,14 @@ std::string FitOptions::validate() const {
   if (!(robust_scale >= 0) || !std::isfinite(robust_scale)) return "robust_scale: must be finite and >= 0";
   if (!(w_constraint >= 0) || !std::isfinite(w_constraint)) return "w_constraint: must be finite and >= 0";
   if (auto err = constraints.validate(); !err.empty()) return err;
+  if (check.part) {
+    for (double v : {check.tolerance, check.clearance, check.band})
+      if (!(v >= 0) || !std::isfinite(v)) return "check: tolerance, clearance and band must be finite and >= 0";
+    if (!(check.weight > 0) || !std::isfinite(check.weight)) return "check.weight: must be finite and > 0";
+    if (!(check.depth_limit > 0 && check.depth_limit <= 1)) return "check.depth_limit: must be in (0, 1]";
+    for (const Eigen::Vector2d& b : check.body)
+      if (!(b.x() >= 0 && b.y() >= 0) || !b.allFinite()) return "check.body: samples must be finite with u, radius >= 0";
+  }
   if (threads < 1) return "threads: at least 1";
   return {};
 }

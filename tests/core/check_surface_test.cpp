@@ -176,3 +176,21 @@ TEST_CASE("the part's twin of the design surface is left out of the check surfac
   const TriMesh thin = box({-0.005, 0, 0}, {0, 60, 20}, 4);
   CHECK(check_part(thin, phi, 0.01).twin_faces == 32);
 }
+
+TEST_CASE("check surface options name the bad field") {
+  const SurfaceIndex wall(box({14, -20, -10}, {30, 80, 100}));
+  FitOptions o;
+  o.check.part = &wall;
+  CHECK(o.validate().empty());
+  o.check.weight = 0;
+  CHECK(o.validate().find("check.weight") != std::string::npos);
+  o.check.weight = 3;
+  o.check.depth_limit = 1.5;
+  CHECK(o.validate().find("check.depth_limit") != std::string::npos);
+  o.check.depth_limit = 0.5;
+  o.check.clearance = -1;
+  CHECK(o.validate().find("clearance") != std::string::npos);
+  o.check.clearance = 1;
+  o.check.body = {{1.0, std::nan("")}};
+  CHECK(o.validate().find("check.body") != std::string::npos);
+}
