@@ -14,10 +14,7 @@ double signed_volume(const TriMesh& m) {
 
 CheckPart check_part(const TriMesh& part, const SurfaceIndex& design, double within) {
   CheckPart out;
-  const MeshTopology topo = mesh_topology(part);
-  bool closed = true;
-  for (const auto& e : topo.boundary_edge) closed = closed && !e[0] && !e[1] && !e[2];
-  const bool flip = closed && signed_volume(part) < 0;
+  const bool flip = mesh_topology(part).boundary_edges == 0 && signed_volume(part) < 0;
   out.turned_outward = flip;
   const std::vector<Footpoint> fp = design.closest(part.vertices);
   // Candidates: all three corners on Φ. Φ's orientation relative to the part's is the sign of the

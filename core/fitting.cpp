@@ -74,6 +74,12 @@ std::string FitOptions::validate() const {
 
 LineMotion to_motion(const Rails& r) { return motion_from_rails(r.a, r.b); }
 
+Eigen::Vector3d mean_axis(const Rails& r) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (int i = 0; i <= 20; ++i) mean += (r.b.point(i / 20.0) - r.a.point(i / 20.0)).normalized();
+  return mean;
+}
+
 namespace {
 
 constexpr double kMaxOverhang = 0.05;  // tangential overhang over distance for boundary samples (~3 degrees)
@@ -554,11 +560,7 @@ struct CheckSample {
 std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, const CheckSurface& c, int m, int n) {
   std::vector<CheckSample> out;
   bool body_at_b = true;
-  if (c.up) {
-    Eigen::Vector3d mean = Eigen::Vector3d::Zero();
-    for (int i = 0; i <= 20; ++i) mean += (r.b.point(i / 20.0) - r.a.point(i / 20.0)).normalized();
-    body_at_b = mean.dot(*c.up) >= 0;
-  }
+  if (c.up) body_at_b = mean_axis(r).dot(*c.up) >= 0;
   const double L = std::max(r.length, 1e-12);
   // Rims at the tip and at half and one tip radius above it, and at half and one radius below the
   // shoulder (not at the shoulder itself, where a rim would sit on the edge where the part's top

@@ -126,6 +126,10 @@ struct Rails {
   [[nodiscard]] Eigen::Vector3d point(double t, double s) const { return (1 - s) * a.point(t) + s * b.point(t); }
 };
 [[nodiscard]] LineMotion to_motion(const Rails& r);
+// The motion's mean axis direction a -> b (unit directions at 21 uniform t, summed; not normalised):
+// which way the tool stands (detection turns patches tip down by it, the check surface puts the
+// holder at the upper end by it).
+[[nodiscard]] Eigen::Vector3d mean_axis(const Rails& r);
 
 // The tool's intrusion into the check surface per motion row: rows[i] over t_i = i / (rows - 1) is
 // the worst (R_eff - signed distance) over the cutter and body samples of that row (<= 0: clear),

@@ -281,10 +281,7 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   // down and the holder up in the work frame (the setup applied), as a spindle holds it.
   const Eigen::Vector3d up_part = setup_rotation(job.post).transpose() * Eigen::Vector3d::UnitZ();
   for (DetectedPatch& dp : d.patches) {
-    const Rails& r = dp.fit.fit.rails;
-    Eigen::Vector3d mean_axis = Eigen::Vector3d::Zero();
-    for (int i = 0; i <= 20; ++i) mean_axis += (r.b.point(i / 20.0) - r.a.point(i / 20.0)).normalized();
-    if (mean_axis.dot(up_part) >= 0) continue;
+    if (mean_axis(dp.fit.fit.rails).dot(up_part) >= 0) continue;
     dp.fit = reversed(std::move(dp.fit));
     for (AxisLine& l : dp.spec.lines) std::swap(l.a, l.b);
   }
