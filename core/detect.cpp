@@ -419,8 +419,9 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   } catch (const InputError&) {
     return out;  // the motion left the surface: not a patch
   }
-  out.fit = machine_and_trim(surface, std::move(out.fit), po);
-  if (out.fit.gouges) return out;  // cannot be trimmed clean: rejected
+  // With a check surface: kept out of the part (with_check), rejected when no stretch keeps clear.
+  out.fit = po.fit.check.part ? with_check(surface, std::move(out.fit), po) : machine_and_trim(surface, std::move(out.fit), po);
+  if (out.fit.gouges || out.fit.check_refused || out.fit.check_intrusion > 0) return out;  // cannot be trimmed clean: rejected
   for (size_t v = 0; v < area.size(); ++v) {
     const double d = out.fit.machined.design_deviation[v];
     if (!covered[v] && std::isfinite(d) && std::abs(d) <= po.tolerance) out.gain += area[v];

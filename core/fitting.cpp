@@ -6,6 +6,8 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <numeric>
 #include <optional>
 
@@ -646,12 +648,36 @@ CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const Che
     const double R = cs.offset + (cs.j >= 0 ? tool.d(cs.s) : 0.0);
     const double v = R - dist[k].distance;
     if (v > out.intrusion[size_t(cs.i)]) {
+      if (std::getenv("FC_DBG2") && cs.i % 40 == 0 && v > 0) std::fprintf(stderr, "DBG2 row %d s %.3f j %d body %d reach %.4f v %.5f q %.4f %.4f %.4f\n", cs.i, cs.s, cs.j, int(cs.body), cs.reach, v, dist[k].q.x(), dist[k].q.y(), dist[k].q.z());
       out.intrusion[size_t(cs.i)] = v;
       out.body[size_t(cs.i)] = cs.body;
       out.at[size_t(cs.i)] = dist[k].q;
     }
   }
   return out;
+}
+
+Eigen::Vector3d holder_up(const Rails& rails, const ToolRadius& tool, const CheckSurface& c, int rows,
+                          const Eigen::Vector3d& fallback) {
+  const Eigen::Vector3d axis = mean_axis(rails);
+  if (!c.part || c.body.empty() || rows < 2) return axis.dot(fallback) >= 0 ? axis : Eigen::Vector3d(-axis);
+  // (rows whose shank or holder enters the part, summed intrusion) with the holder at b, then at a.
+  std::array<std::pair<int, double>, 2> score{};
+  for (int e = 0; e < 2; ++e) {
+    CheckSurface ce = c;
+    ce.up = e == 0 ? axis : Eigen::Vector3d(-axis);
+    std::vector<CheckSample> samples = check_samples(rails, tool, ce, rows, 2);
+    samples.erase(std::remove_if(samples.begin(), samples.end(), [](const CheckSample& s) { return !s.body; }),
+                  samples.end());
+    const std::vector<CheckDistance> dist = check_distances(rails, ce, samples, rows);
+    std::vector<double> worst(size_t(rows), 0.0);
+    for (size_t k = 0; k < samples.size(); ++k)
+      worst[size_t(samples[k].i)] = std::max(worst[size_t(samples[k].i)], samples[k].offset - dist[k].distance);
+    for (double w : worst)
+      if (w > 0) ++score[size_t(e)].first, score[size_t(e)].second += w;
+  }
+  if (score[0] == score[1]) return axis.dot(fallback) >= 0 ? axis : Eigen::Vector3d(-axis);
+  return score[0] < score[1] ? axis : Eigen::Vector3d(-axis);
 }
 
 namespace {

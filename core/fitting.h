@@ -142,6 +142,14 @@ struct CheckProfile {
 [[nodiscard]] CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const CheckSurface& check,
                                          int rows, int samples_s);
 
+// Which way the holder should stand for a motion against a check surface: the end of the axis
+// whose shank and holder (check.body) enter the part in fewer rows (then by less), as a direction
+// for CheckSurface::up (± mean_axis(rails)); `fallback` decides a tie (no part, no body, both clear
+// or both equally deep): the end along it. A blade's flank next to a hub gets its tip at the hub
+// whichever way the machine's Z points.
+[[nodiscard]] Eigen::Vector3d holder_up(const Rails& rails, const ToolRadius& tool, const CheckSurface& check, int rows,
+                                        const Eigen::Vector3d& fallback);
+
 // A finite line [a, b] (unit frame).
 struct AxisLine {
   Eigen::Vector3d a, b;

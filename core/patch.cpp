@@ -4,6 +4,8 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 
 #include "core/errors.h"
 
@@ -62,27 +64,6 @@ PatchFit fit_patch(const SurfaceIndex& surface, const PatchSpec& spec, const Pat
   return out;
 }
 
-PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOptions& o) {
-  if (!o.fit.check.part) return machine_and_trim(surface, std::move(plain), o);
-  const CheckProfile profile = check_profile(plain.fit.rails, plain.fit.tool, o.fit.check, 2 * o.fit.samples_t, o.fit.samples_s);
-  const bool clear = std::all_of(profile.intrusion.begin(), profile.intrusion.end(), [](double v) { return !(v > 0); });
-  PatchFit trimmed_plain = machine_and_trim(surface, plain, o);
-  if (clear) return trimmed_plain;
-  if (o.on_stage) o.on_stage("refitting with the part as a check surface");
-  PatchFit refit = plain;
-  refit.fit = optimize_motion(surface, plain.fit.rails, o.fit);
-  refit.fit.eps_ini = plain.fit.eps_ini;
-  refit.fit.iterations += plain.fit.iterations;
-  refit = machine_and_trim(surface, std::move(refit), o);
-  const auto good = [](const PatchFit& f) { return !f.check_refused && !(f.check_intrusion > 0) && !f.gouges; };
-  // A refit that keeps clear by fitting Φ much worse is no way out.
-  const bool a = good(trimmed_plain),
-             b = good(refit) && refit.fit.eps_opt.max <= std::max(o.tolerance, 2 * plain.fit.eps_opt.max);
-  if (a != b) return b ? refit : trimmed_plain;
-  if (a) return refit.coverage > trimmed_plain.coverage ? refit : trimmed_plain;
-  return trimmed_plain;  // neither clear: the plain fit, reported with its collisions
-}
-
 namespace {
 // Rows of Ω (t) without a point below Φ by more than `tolerance`: an Ω vertex, or a Φ vertex whose
 // closest Ω point lies in the row.
@@ -127,6 +108,119 @@ std::vector<char> clear_rows(const PatchFit& f, const PatchOptions& o, CheckProf
   return ok;
 }
 }  // namespace
+
+ToolCut cut_tool(const Rails& r, const ToolRadius& tool, double lo, double hi) {
+  ToolCut out{r, tool};
+  if (r.a.size() == r.b.size()) {  // (1 - s) a(t) + s b(t) is the spline with the mixed control points
+    out.rails.a.ctrl = (1 - lo) * r.a.ctrl + lo * r.b.ctrl;
+    out.rails.b.ctrl = (1 - hi) * r.a.ctrl + hi * r.b.ctrl;
+  } else {
+    const int samples = 8 * std::max(r.a.size(), r.b.size());
+    const std::vector<double> ts = uniform_parameters(samples);
+    Eigen::MatrixXd A(samples, 3), B(samples, 3);
+    for (int i = 0; i < samples; ++i) A.row(i) = r.point(ts[size_t(i)], lo).transpose(), B.row(i) = r.point(ts[size_t(i)], hi).transpose();
+    out.rails.a = fit_bspline(A, ts, r.a.size());
+    out.rails.b = fit_bspline(B, ts, r.b.size());
+  }
+  out.rails.length = r.length * (hi - lo);
+  if (tool.shape == ToolShape::Cone) {
+    out.tool.D = {tool.d(lo), tool.d(hi)};
+  } else if (tool.shape == ToolShape::General) {
+    const int K = int(tool.D.size()), samples = 16 * K;
+    const std::vector<double> ss = uniform_parameters(samples);
+    Eigen::MatrixXd P(samples, 1);
+    for (int i = 0; i < samples; ++i) P(i, 0) = tool.d(lo + (hi - lo) * ss[size_t(i)]);
+    const BSpline f = fit_bspline(P, ss, K);
+    out.tool.D.assign(f.ctrl.data(), f.ctrl.data() + K);
+    for (int i = 0; i < samples; ++i) out.radius_error = std::max(out.radius_error, std::abs(out.tool.d(ss[size_t(i)]) - P(i, 0)));
+  }
+  return out;
+}
+
+namespace {
+// The cutter ground shorter at its tip end (the end away from the holder, CheckSurface::up) until it
+// keeps out of the part: what stays of the tool sweeps the same surface, only the strip the cut-off
+// length made is lost. Cuts of 5%, 10%, ... 60% of the length are tried; the one whose longest clear
+// stretch of rows times its remaining length is largest is kept, trimmed and measured. None when
+// the tool is a fixed one (a catalogue or shared tool cannot be ground) or no cut helps.
+std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& plain, const PatchOptions& o) {
+  if (o.fit.fixed_tool) return std::nullopt;
+  const Rails& r = plain.fit.rails;
+  const bool tip_at_a = !o.fit.check.up || mean_axis(r).dot(*o.fit.check.up) >= 0;
+  const int rows = 2 * o.fit.samples_t;
+  double best_score = 0;
+  std::optional<ToolCut> best;
+  for (int k = 1; k <= 12; ++k) {
+    const double c = 0.05 * k;
+    ToolCut cut = tip_at_a ? cut_tool(r, plain.fit.tool, c, 1) : cut_tool(r, plain.fit.tool, 0, 1 - c);
+    if (std::getenv("FC_DBG")) std::fprintf(stderr, "DBG cut %.2f: radius error %.2e constraint %.2e\n", c, cut.radius_error, check_constraints(cut.tool, cut.rails.length, o.fit.constraints).violation);
+    if (cut.radius_error > 0.1 * o.tolerance) continue;
+    if (check_constraints(cut.tool, cut.rails.length, o.fit.constraints).violation > 0.01 * o.tolerance) continue;
+    const CheckProfile p = check_profile(cut.rails, cut.tool, o.fit.check, rows, o.fit.samples_s);
+    std::vector<char> ok(static_cast<size_t>(rows));
+    for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(p.intrusion[size_t(i)] > 0);
+    const auto [t0, t1] = longest_run(ok);
+    const double score = (t1 - t0) * (1 - c);
+    if (std::getenv("FC_DBG")) std::fprintf(stderr, "DBG cut %.2f: clear %.3f-%.3f\n", c, t0, t1);
+    if (score > best_score) best_score = score, best = std::move(cut);
+    if (t0 == 0.0 && t1 == 1.0) break;  // clear everywhere: a longer cut only loses
+  }
+  if (!best) return std::nullopt;
+  if (o.on_stage)
+    o.on_stage("tip shortened by " + std::to_string(int(std::lround(100 * (1 - best->rails.length / r.length)))) +
+               "% of the tool length");
+  PatchFit f = plain;
+  f.fit.rails = best->rails;
+  f.fit.tool = best->tool;
+  try {
+    f.fit.eps_opt = sample_error(surface, f.fit.rails, f.fit.tool, o.fit);
+  } catch (const InputError&) {
+    return std::nullopt;  // what stays of the tool is no longer over Φ
+  }
+  return machine_and_trim(surface, std::move(f), o);
+}
+}  // namespace
+
+PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOptions& options) {
+  if (!options.fit.check.part) return machine_and_trim(surface, std::move(plain), options);
+  PatchOptions o = options;
+  if (o.orient_by_part)
+    o.fit.check.up = holder_up(plain.fit.rails, plain.fit.tool, o.fit.check, 2 * o.fit.samples_t,
+                               o.fit.check.up.value_or(mean_axis(plain.fit.rails)));
+  const auto tip_at_a = [&](PatchFit f) {
+    return o.orient_by_part && mean_axis(f.fit.rails).dot(*o.fit.check.up) < 0 ? reversed(std::move(f)) : f;
+  };
+  const CheckProfile profile = check_profile(plain.fit.rails, plain.fit.tool, o.fit.check, 2 * o.fit.samples_t, o.fit.samples_s);
+  const bool clear = std::all_of(profile.intrusion.begin(), profile.intrusion.end(), [](double v) { return !(v > 0); });
+  PatchFit best = machine_and_trim(surface, plain, o);
+  if (clear) return tip_at_a(std::move(best));
+  const auto good = [](const PatchFit& f) { return !f.check_refused && !(f.check_intrusion > 0) && !f.gouges; };
+  const auto dbg = [&](const char* w, const PatchFit& f) { if (std::getenv("FC_DBG")) std::fprintf(stderr, "DBG %s: cov %.3f t %.3f-%.3f intr %.5f refused %d gouges %d L %.4f eps %.2e\n", w, f.coverage, f.t_from, f.t_to, f.check_intrusion, int(f.check_refused), int(f.gouges), f.fit.rails.length, f.fit.eps_opt.max); };
+  dbg("plain-trimmed", best);
+  // The tool shortened at its tip (a hub under the flank's lower edge): clear, it is compared with the
+  // trimmed plain motion by coverage (and replaces it when that is not clear).
+  if (o.on_stage) o.on_stage("shortening the tool at its tip to keep out of the part");
+  if (std::optional<PatchFit> cut = cut_at_tip(surface, plain, o); cut && good(*cut))
+    if (dbg("cut", *cut), !good(best) || cut->coverage > best.coverage) best = std::move(*cut);
+  // Clear along the whole motion: a penalised refit could only tilt it away from Φ.
+  if (good(best) && best.t_from == 0.0 && best.t_to == 1.0) return tip_at_a(std::move(best));
+  if (o.on_stage) o.on_stage("refitting with the part as a check surface");
+  PatchFit refit = plain;
+  try {
+    refit.fit = optimize_motion(surface, plain.fit.rails, o.fit);
+  } catch (const InputError&) {
+    return tip_at_a(std::move(best));  // the penalties pushed the motion off Φ: no way out there
+  }
+  refit.fit.eps_ini = plain.fit.eps_ini;
+  refit.fit.iterations += plain.fit.iterations;
+  refit = machine_and_trim(surface, std::move(refit), o);
+  dbg("refit", refit);
+  // A refit that keeps clear by fitting Φ much worse is no way out.
+  const bool a = good(best), b = good(refit) && refit.fit.eps_opt.max <= std::max(o.tolerance, 2 * plain.fit.eps_opt.max);
+  if (a != b) return tip_at_a(b ? std::move(refit) : std::move(best));
+  if (a && refit.coverage > best.coverage) return tip_at_a(std::move(refit));
+  return tip_at_a(std::move(best));  // the better clear one, or neither clear: reported with its collisions
+}
 
 std::pair<double, double> ungouged_range(const MachinedSurface& ms, double tolerance) {
   return longest_run(ungouged_rows(ms, tolerance));

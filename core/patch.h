@@ -37,6 +37,9 @@ struct PatchOptions {
   bool trim_gouges = false;
   // With a check surface (fit.check) the motion is always trimmed to the longest stretch where the
   // tool keeps out of the part (cutter within fit.check.tolerance, body outside the clearance).
+  // With a check surface: the holder end is chosen by the part (holder_up, fit.check.up the
+  // tie-break), and with_check returns the fit turned so that its tip is the a end (rail 0).
+  bool orient_by_part = false;
   // Stage messages ("exploring the line", ...) for progress output; may be empty.
   std::function<void(const std::string&)> on_stage;
 };
@@ -80,6 +83,17 @@ struct PatchFit {
 // when the fit is clear already, it is only machined and measured. fit_patch fits this way, and
 // `patches: auto` applies it to every detected patch.
 [[nodiscard]] PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOptions& options);
+
+// The cutter restricted to s in [lo, hi] of its axis (the rest ground off): rails through the new
+// ends, the radii re-parametrised over the shorter axis (exact for cylinders and cones, a
+// least-squares cubic spline with as many values for general tools: `radius_error` is its worst
+// deviation, unit frame). What stays sweeps the same surface as before.
+struct ToolCut {
+  Rails rails;
+  ToolRadius tool;
+  double radius_error = 0;
+};
+[[nodiscard]] ToolCut cut_tool(const Rails& rails, const ToolRadius& tool, double lo, double hi);
 
 // The rails restricted to [t0, t1], reparametrised to [0, 1] (same control point count).
 [[nodiscard]] Rails trimmed(const Rails& rails, double t0, double t1);

@@ -236,7 +236,10 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   co.coverage = job.cover->coverage;
   co.max_patches = job.cover->max_patches;
   co.patch.fit = fit;
-  co.patch.fit.check = {};  // detection as without a part; the part is applied to each detected patch below
+  // With a part, every candidate patch is kept out of it (with_check: tip shortened, trimmed or refitted;
+  // rejected when nothing stays clear), its holder at the end whose shank keeps out of the part (a
+  // blade's flank next to a hub: the tip at the hub, whichever way the work frame's Z points there).
+  co.patch.orient_by_part = true;
   co.patch.tolerance = out.frame.length_to_unit(job.tolerance_mm);
   // Candidate radii within the tool's limits (max_diameter, min_diameter): the default candidates
   // below the largest allowed, and that radius at 1/2, 3/4 and full.
@@ -256,32 +259,12 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
     progress(fmt::format("detect: {}: seed {} of {}, {} patches, coverage {:.1f}%", c.stage, c.seed, c.seeds, c.patches,
                          100 * c.coverage));
   });
-  // The part as a check surface (fit.check): each patch refitted or trimmed to keep clear of it
-  // (with_check), and the whole surface's union measured again.
-  if (fit.check.part && !d.patches.empty()) {
-    PatchOptions po = co.patch;
-    po.fit.check = fit.check;
-    po.trim_gouges = true;
-    std::vector<const MachinedSurface*> machined;
-    for (DetectedPatch& dp : d.patches) {
-      po.on_stage = [&](const std::string& s) { progress(fmt::format("detect: {}: {}", dp.spec.name, s)); };
-      dp.fit = with_check(index, std::move(dp.fit), po);
-      dp.spec.lines = lines_of(dp.fit.fit.rails, co.lines);
-      machined.push_back(&dp.fit.machined);
-    }
-    UnionDeviation u = union_deviation(machined, index.mesh().vertices.size());
-    d.owner = std::move(u.owner);
-    d.deviation = std::move(u.deviation);
-    d.coverage = coverage(index.mesh(), d.deviation, co.patch.tolerance);
-    d.overcut = 0;
-    for (double x : d.deviation)
-      if (std::isfinite(x)) d.overcut = std::max(d.overcut, -x);
-  }
-  // Detection does not know the machine: turn every patch so that its tool stands with the tip
-  // down and the holder up in the work frame (the setup applied), as a spindle holds it.
+  // Detection does not know the machine: without a part, every patch is turned so that its tool
+  // stands with the tip down and the holder up in the work frame (the setup applied), as a spindle
+  // holds it (with a part, with_check has put the tip at a already).
   const Eigen::Vector3d up_part = setup_rotation(job.post).transpose() * Eigen::Vector3d::UnitZ();
   for (DetectedPatch& dp : d.patches) {
-    if (mean_axis(dp.fit.fit.rails).dot(up_part) >= 0) continue;
+    if (fit.check.part || mean_axis(dp.fit.fit.rails).dot(up_part) >= 0) continue;
     dp.fit = reversed(std::move(dp.fit));
     for (AxisLine& l : dp.spec.lines) std::swap(l.a, l.b);
   }

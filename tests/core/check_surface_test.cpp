@@ -194,3 +194,104 @@ TEST_CASE("check surface options name the bad field") {
   o.check.body = {{1.0, std::nan("")}};
   CHECK(o.validate().find("check.body") != std::string::npos);
 }
+
+namespace {
+// The hub under the flank: a block below z = 0 whose top rises away from the flank, z = 0.3 x (mm),
+// so a flat tool end level with the flank's lower edge enters it (3 mm deep at x = 10).
+TriMesh sloping_hub() {
+  TriMesh hub = box({0, -20, -10}, {30, 80, 0}, 4);
+  for (Eigen::Vector3d& p : hub.vertices)
+    if (p.z() > -1e-9) p.z() = 0.3 * p.x();
+  return hub;
+}
+}  // namespace
+
+TEST_CASE("a tool whose end would cut the hub under the flank is ground shorter at its tip") {
+  Setup s;
+  const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
+  PatchOptions po;
+  po.fit = s.o;
+  po.tolerance = s.fr.length_to_unit(0.01);
+  PatchSpec spec;
+  spec.name = "p";
+  for (double y : {5.0, 20.0, 35.0, 50.0}) spec.lines.push_back({s.fr.to_unit({5, y, 0}), s.fr.to_unit({5, y, 20})});
+  const PatchFit free = fit_patch(s.phi, spec, po);
+  po.fit.check.part = &hub;
+  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
+  po.fit.check.body = s.body();
+  // Without the hub the flat end sits level with the flank's lower edge, 3 mm into the hub at x = 10
+  // (2.87 mm where the 12-point rim samples it).
+  const CheckProfile before = check_profile(free.fit.rails, free.fit.tool, po.fit.check, 50, po.fit.samples_s);
+  CHECK(s.fr.length_to_mm(*std::max_element(before.intrusion.begin(), before.intrusion.end())) > 2.8);
+  const PatchFit f = fit_patch(s.phi, spec, po);
+  // With it the cutter is shortened at its tip until its end clears the hub (a cut of at least 3 mm;
+  // the cuts tried are 5% steps of the length): the whole motion is kept, nothing enters the hub, and
+  // the flank above the cut is machined as before (what stays of the tool sweeps the same surface).
+  double tip_z = INFINITY;
+  for (int i = 0; i <= 20; ++i) tip_z = std::min(tip_z, s.fr.to_mm(f.fit.rails.a.point(i / 20.0)).z());
+  MESSAGE("tip at z = ", tip_z, " mm, length ", s.fr.length_to_mm(f.fit.rails.length), " mm (was ",
+          s.fr.length_to_mm(free.fit.rails.length), "), coverage ", f.coverage, " (was ", free.coverage, "), eps ",
+          s.fr.length_to_mm(f.fit.eps_opt.max), " mm");
+  CHECK(f.check_intrusion <= 0);
+  CHECK(!f.check_refused);
+  CHECK(f.t_from == 0.0);
+  CHECK(f.t_to == 1.0);
+  CHECK(tip_z > 2.95);
+  CHECK(tip_z < 4.5);
+  CHECK(s.fr.length_to_mm(f.fit.rails.length) < s.fr.length_to_mm(free.fit.rails.length) - 2.9);
+  CHECK(s.fr.length_to_mm(f.fit.eps_opt.max) < 0.01);
+  // The band under the cut (3-4 of the flank's 20 mm) is what is lost.
+  CHECK(f.coverage > 0.78 * free.coverage);
+  CHECK(f.coverage < 0.9 * free.coverage);
+}
+
+TEST_CASE("the holder end is chosen by the part: away from the hub whichever way up points") {
+  Setup s;
+  const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
+  const FitResult fit = optimize_motion(s.phi, s.initial, s.o);  // tip (a) at z = 0, b at z = 20
+  CheckSurface c;
+  c.part = &hub;
+  c.tolerance = s.fr.length_to_unit(0.005);
+  c.body = s.body();
+  const Eigen::Vector3d down = -Eigen::Vector3d::UnitZ(), across = Eigen::Vector3d::UnitY();
+  // Holder at a would stand in the hub: b (+z) wins over a fallback pointing down or sideways.
+  CHECK(holder_up(fit.rails, fit.tool, c, 50, down).z() > 0);
+  CHECK(holder_up(fit.rails, fit.tool, c, 50, across).z() > 0);
+  // Without a body to place (or without a part) the fallback decides.
+  c.body.clear();
+  CHECK(holder_up(fit.rails, fit.tool, c, 50, down).z() < 0);
+  c.body = s.body();
+  c.part = nullptr;
+  CHECK(holder_up(fit.rails, fit.tool, c, 50, down).z() < 0);
+}
+
+TEST_CASE("cut_tool keeps the swept tool: rails and radii of the part that stays") {
+  Setup s;
+  for (const ToolShape shape : {ToolShape::Cone, ToolShape::General}) {
+    FitOptions o = s.o;
+    o.shape = shape;
+    const FitResult fit = optimize_motion(s.phi, s.initial, o);
+    ToolRadius tool = fit.tool;
+    // A tool that is neither constant nor linear (the cone gets its own two values).
+    if (shape == ToolShape::General)
+      for (size_t k = 0; k < tool.D.size(); ++k) tool.D[k] = 0.02 + 0.004 * std::sin(0.5 * double(k));
+    else
+      tool.D = {0.02, 0.03};
+    const double lo = 0.2, hi = 0.9;
+    const ToolCut cut = cut_tool(fit.rails, tool, lo, hi);
+    CHECK(cut.rails.length == doctest::Approx(fit.rails.length * (hi - lo)));
+    double worst_axis = 0, worst_radius = 0;
+    for (int i = 0; i <= 10; ++i)
+      for (int j = 0; j <= 10; ++j) {
+        const double t = i / 10.0, u = j / 10.0, sv = lo + (hi - lo) * u;
+        worst_axis = std::max(worst_axis, (cut.rails.point(t, u) - fit.rails.point(t, sv)).norm());
+        worst_radius = std::max(worst_radius, std::abs(cut.tool.d(u) - tool.d(sv)));
+      }
+    MESSAGE(std::string(to_string(shape)), ": axis ", worst_axis, ", radius ", worst_radius, " (reported ", cut.radius_error, ")");
+    CHECK(worst_axis < 1e-12);
+    if (shape == ToolShape::Cone) CHECK(worst_radius < 1e-15);
+    // General: a least-squares spline over the shorter axis, within a thousandth of the waviness.
+    CHECK(worst_radius < 1e-3 * 0.004);
+    CHECK(worst_radius <= cut.radius_error * 1.01 + 1e-15);
+  }
+}
