@@ -569,10 +569,21 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
   // face meets Φ's top boundary; the shank's samples start there).
   std::vector<double> rim_s;
   const double d_a = tool.d(body_at_b ? 0.0 : 1.0), d_b = tool.d(body_at_b ? 1.0 : 0.0);
-  for (const double f : {0.0, 0.5, 1.0}) rim_s.push_back(std::min(f * d_a / L, 0.5));
+  if (!c.ball_tip)
+    for (const double f : {0.0, 0.5, 1.0}) rim_s.push_back(std::min(f * d_a / L, 0.5));
   for (const double f : {0.5, 1.0}) rim_s.push_back(std::max(1 - f * d_b / L, 0.5));
   if (!body_at_b)
     for (double& x : rim_s) x = 1 - x;
+  // A ball end: the sphere tangent to the tip plane and to the side, radius d(0) (1 + sin α) with
+  // sin α = d'(z) at the tip (core/tool_end.h), its centre that far above the tip.
+  double ball_s = 0, ball_r = 0;
+  if (c.ball_tip) {
+    const double h = 1e-3, inward = body_at_b ? h : 1 - h;
+    const double sin_a = std::clamp((tool.d(inward) - d_a) / (h * L), -0.9, 0.9);
+    ball_r = d_a * (1 + sin_a);
+    ball_s = std::min(ball_r / L, 0.5);
+    if (!body_at_b) ball_s = 1 - ball_s;
+  }
   constexpr int kRim = 12;
   for (int i = 0; i < m; ++i) {
     const double t = double(i) / (m - 1);
@@ -582,6 +593,7 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
     }
     const Eigen::Vector3d axis = (r.b.point(t) - r.a.point(t)).normalized();
     const Eigen::Vector3d u = axis.unitOrthogonal(), v = axis.cross(u);
+    if (c.ball_tip) out.push_back({i, ball_s, -1, ball_r - c.tolerance, Eigen::Vector3d::Zero(), ball_r});
     for (const double sr : rim_s)
       for (int k = 0; k < kRim; ++k) {
         const double th = 2 * M_PI * k / kRim;

@@ -71,6 +71,10 @@ struct CheckSurface {
   // The tool's holder side: the end of the axis segment whose direction from the other end points
   // along `up` (mean over the motion). Unset: the b end (s = 1), the tip is a.
   std::optional<Eigen::Vector3d> up;
+  // The cutter's tip end is a ball (tool.end: ball): one sphere, tangent to the tip plane and to the
+  // side, stands for the end instead of the flat end's rims (a corner radius is checked as flat, which
+  // is on the safe side).
+  bool ball_tip = false;
   double weight = 3;      // per unit of intrusion, relative to the plane term's weight
   // Samples farther from the part than their radius plus this are left out of a round, and so are
   // those more than this share of their radius inside it (the tool deep in the part: no nearby

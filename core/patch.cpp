@@ -172,6 +172,7 @@ std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& 
   PatchFit f = plain;
   f.fit.rails = best->rails;
   f.fit.tool = best->tool;
+  f.tip_shortened = r.length - best->rails.length;
   try {
     f.fit.eps_opt = sample_error(surface, f.fit.rails, f.fit.tool, o.fit);
   } catch (const InputError&) {
@@ -200,10 +201,13 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   // The tool shortened at its tip (a hub under the flank's lower edge): clear, it is compared with the
   // trimmed plain motion by coverage (and replaces it when that is not clear).
   if (o.on_stage) o.on_stage("shortening the tool at its tip to keep out of the part");
+  bool shortened = false;
   if (std::optional<PatchFit> cut = cut_at_tip(surface, plain, o); cut && good(*cut))
-    if (dbg("cut", *cut), !good(best) || cut->coverage > best.coverage) best = std::move(*cut);
-  // Clear along the whole motion: a penalised refit could only tilt it away from Φ.
-  if (good(best) && best.t_from == 0.0 && best.t_to == 1.0) return tip_at_a(std::move(best));
+    if (dbg("cut", *cut), !good(best) || cut->coverage > best.coverage) best = std::move(*cut), shortened = true;
+  // The tip was what entered the part (shortening it gained most), or no refit is wanted: a penalised
+  // refit, which tilts the whole axis, is not tried (on the HECC impeller it never beat the shortened
+  // tool, at ~10 s a patch).
+  if (shortened || !o.refit_with_check) return tip_at_a(std::move(best));
   if (o.on_stage) o.on_stage("refitting with the part as a check surface");
   PatchFit refit = plain;
   try {

@@ -40,6 +40,10 @@ struct PatchOptions {
   // With a check surface: the holder end is chosen by the part (holder_up, fit.check.up the
   // tie-break), and with_check returns the fit turned so that its tip is the a end (rail 0).
   bool orient_by_part = false;
+  // With a check surface: when neither the trimmed motion nor the shortened tool keeps clear along the
+  // whole motion, the motion is refitted with the part's penalties too (with_check). Detection turns
+  // this off for its many candidates (a refit costs as much as the fit itself).
+  bool refit_with_check = true;
   // Stage messages ("exploring the line", ...) for progress output; may be empty.
   std::function<void(const std::string&)> on_stage;
 };
@@ -64,6 +68,7 @@ struct PatchFit {
   std::optional<CheckTrim> check_trim;
   double check_intrusion = -INFINITY;
   bool check_refused = false;
+  double tip_shortened = 0;  // length ground off the cutter's tip end to keep it out of the part (unit frame)
   std::optional<ExploredLine> explored;     // line-driven only
   std::optional<LineTrajectory> trajectory;  // line-driven only
 };

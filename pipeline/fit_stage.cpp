@@ -219,6 +219,9 @@ void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, con
                        job.tolerance_mm, fp.fit.seconds_init, fp.fit.seconds_opt));
   if (r.status == FitStatus::SolverFailed)
     progress(fmt::format("patch {}: the least-squares solver failed ({}); the last good motion is kept", name, r.message));
+  if (fp.fit.tip_shortened > 0)
+    progress(fmt::format("patch {}: the tool ground {:.3f} mm shorter at its tip to keep its end out of the part", name,
+                         out.frame.length_to_mm(fp.fit.tip_shortened)));
   if (const auto& c = fp.fit.check_trim) {
     const Eigen::Vector3d at = out.frame.to_mm(c->at);
     progress(fmt::format("patch {}: {} t {:.3f}-{:.3f}: the {} would {} {:.3f} mm {} the part at ({:.3f}, {:.3f}, {:.3f})",
@@ -240,6 +243,7 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   // rejected when nothing stays clear), its holder at the end whose shank keeps out of the part (a
   // blade's flank next to a hub: the tip at the hub, whichever way the work frame's Z points there).
   co.patch.orient_by_part = true;
+  co.patch.refit_with_check = false;
   co.patch.tolerance = out.frame.length_to_unit(job.tolerance_mm);
   // Candidate radii within the tool's limits (max_diameter, min_diameter): the default candidates
   // below the largest allowed, and that radius at 1/2, 3/4 and full.
@@ -384,6 +388,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
       o.check.tolerance = out.frame.length_to_unit(job.check_tolerance_mm.value_or(job.tolerance_mm));
       o.check.clearance = out.frame.length_to_unit(job.clearance_mm);
       o.check.body = body_samples(job.holder, out.frame);
+      o.check.ball_tip = job.tool.end.kind == EndKind::Ball;
       // Detected patches are turned tip down afterwards (detect_job): the holder goes up.
       if (job.cover) o.check.up = setup_rotation(job.post).transpose() * Eigen::Vector3d::UnitZ();
     }
@@ -619,6 +624,7 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
                                 {"clearance_mm", job.clearance_mm},
                                 {"kept_t", {p.fit.t_from, p.fit.t_to}},
                                 {"worst_intrusion_mm", round_mm(fr.length_to_mm(p.fit.check_intrusion))},
+                                {"tip_shortened_mm", round_mm(fr.length_to_mm(p.fit.tip_shortened))},
                                 {"refused", p.fit.check_refused}};
     if (const auto& t = p.fit.check_trim)
       c["trimmed_because"] = {{"component", t->body ? "shank or holder" : "cutter"},

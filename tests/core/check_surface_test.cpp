@@ -239,6 +239,7 @@ TEST_CASE("a tool whose end would cut the hub under the flank is ground shorter 
   CHECK(tip_z > 2.95);
   CHECK(tip_z < 4.5);
   CHECK(s.fr.length_to_mm(f.fit.rails.length) < s.fr.length_to_mm(free.fit.rails.length) - 2.9);
+  CHECK(f.tip_shortened == doctest::Approx(free.fit.rails.length - f.fit.rails.length));
   CHECK(s.fr.length_to_mm(f.fit.eps_opt.max) < 0.01);
   // The band under the cut (3-4 of the flank's 20 mm) is what is lost.
   CHECK(f.coverage > 0.78 * free.coverage);
@@ -294,4 +295,29 @@ TEST_CASE("cut_tool keeps the swept tool: rails and radii of the part that stays
     CHECK(worst_radius < 1e-3 * 0.004);
     CHECK(worst_radius <= cut.radius_error * 1.01 + 1e-15);
   }
+}
+
+TEST_CASE("a ball end is checked as its ball: shortened less than a flat end over the same hub") {
+  Setup s;
+  const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
+  PatchOptions po;
+  po.fit = s.o;
+  po.tolerance = s.fr.length_to_unit(0.01);
+  po.fit.check.part = &hub;
+  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
+  po.fit.check.body = s.body();
+  po.fit.check.ball_tip = true;
+  po.machined.end = ToolEnd{EndKind::Ball, 0, s.fr.length_to_mm(1.0)};
+  PatchSpec spec;
+  spec.name = "p";
+  for (double y : {5.0, 20.0, 35.0, 50.0}) spec.lines.push_back({s.fr.to_unit({5, y, 0}), s.fr.to_unit({5, y, 20})});
+  const PatchFit f = fit_patch(s.phi, spec, po);
+  // The Ø10 ball's centre must stay 5 mm from the hub's plane z = 0.3 x; for the axis at x = 5: (z_tip + 5 - 1.5) / 1.044 >= 5, z_tip >= 1.72 mm (a flat end: 3 mm).
+  double tip_z = INFINITY;
+  for (int i = 0; i <= 20; ++i) tip_z = std::min(tip_z, s.fr.to_mm(f.fit.rails.a.point(i / 20.0)).z());
+  MESSAGE("ball: tip at z = ", tip_z, " mm, shortened ", s.fr.length_to_mm(f.tip_shortened), " mm");
+  CHECK(f.check_intrusion <= 0);
+  CHECK(!f.check_refused);
+  CHECK(tip_z > 1.7);
+  CHECK(tip_z < 2.9);
 }
