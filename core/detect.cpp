@@ -27,6 +27,7 @@ std::string CoverOptions::validate() const {
   if (!(sweep_step > 0 && sweep_step < 0.1)) return "cover.sweep_step: must be in (0, 0.1)";
   if (refine_evaluations < 0) return "cover.refine_evaluations: must be >= 0";
   if (explored_unrefined < 0) return "cover.explored_unrefined: must be >= 0";
+  if (oriented_lines < 0) return "cover.oriented_lines: must be >= 0";
   if (fitted_seeds < 1 || fitted_seeds > explored_seeds + explored_unrefined)
     return "cover.fitted_seeds: 1 .. explored_seeds + explored_unrefined";
   if (!(band >= 0) || !std::isfinite(band)) return "cover.band: must be >= 0";
@@ -73,6 +74,10 @@ UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machin
       }
     }
   return u;
+}
+
+namespace detail {
+std::function<void(const std::string&, const AxisLine&, double, double)> detect_trace;  // DEBUG
 }
 
 namespace {
@@ -176,10 +181,12 @@ std::array<Seed, 2> best_lines_at(const SurfaceIndex& surface, const std::vector
       dirs.push_back(std::cos(phi) * t1 + std::sin(phi) * t2);
     }
   }
-  std::array<Seed, 2> best;  // per side: -1, +1
-  best[0].vertex = best[1].vertex = v;
-  best[0].side = -1;
-  best[1].side = 1;
+  struct Line {
+    AxisLine line;
+    Eigen::Vector3d pivot;
+    double F, rank;
+  };
+  std::array<std::vector<Line>, 2> lines;  // per side: -1, +1
   constexpr int reach_samples = 121;  // 0.0125 apart: a line as short as 0.05 of the diagonal is seen
   constexpr double reach = 0.75;  // half-length of the probe line (unit frame)
   const auto u_of = [&](int i) { return -reach + 2 * reach * i / (reach_samples - 1); };
@@ -215,13 +222,33 @@ std::array<Seed, 2> best_lines_at(const SurfaceIndex& surface, const std::vector
         if (!m.movable || m.used_samples * 5 < 4 * o.patch.exploration.movability.samples) continue;
         // Below ~1e-8 (angles ~1e-4 rad) F_l is tessellation noise: among such lines the longest
         // reaches furthest across Φ, so the rank is F_l floored there, per unit length.
-        const double rank = std::max(m.F, kMovableF) / (u1 - u0);
-        Seed& b = best[side > 0 ? 1 : 0];
-        if (rank < b.rank) {
-          b.rank = rank;
-          b.F = m.F;
-          b.line = line;
-        }
+        lines[side > 0 ? 1 : 0].push_back({line, c, m.F, std::max(m.F, kMovableF) / (u1 - u0)});
+      }
+  }
+  std::array<Seed, 2> best;  // per side: -1, +1
+  best[0].vertex = best[1].vertex = v;
+  best[0].side = -1;
+  best[1].side = 1;
+  OrientationOptions orientation;
+  orientation.movability = o.patch.exploration.movability;
+  for (int s = 0; s < 2; ++s) {
+    auto& ls = lines[size_t(s)];
+    std::stable_sort(ls.begin(), ls.end(), [](const Line& x, const Line& y) { return x.rank < y.rank; });
+    // The most movable lines turned about their seed point to the direction of least F_l (the axis
+    // of a general tool leaves the tangent plane), then ranked again.
+    for (size_t k = 0; k < ls.size() && int(k) < o.oriented_lines; ++k) {
+      if (ls[k].F > kMovableF) {
+        const OrientedLine ol = orient_line(surface, ls[k].line.a, ls[k].line.b, ls[k].pivot, orientation);
+        ls[k].line = {ol.a, ol.b};
+        ls[k].rank *= std::max(ol.movability.F, kMovableF) / std::max(ls[k].F, kMovableF);
+        ls[k].F = ol.movability.F;
+      }
+    }
+    for (const Line& l : ls)
+      if (l.rank < best[size_t(s)].rank) {
+        best[size_t(s)].rank = l.rank;
+        best[size_t(s)].F = l.F;
+        best[size_t(s)].line = l.line;
       }
   }
   return best;
@@ -506,6 +533,10 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
     report("refining seed lines");
 #pragma omp parallel for schedule(dynamic, 1)
     for (int k = 0; k < int(seeds.size()); ++k) seeds[size_t(k)] = refine_seed(surface, seeds[size_t(k)], o);
+    if (detail::detect_trace) {
+      for (const auto& pair : at_point) for (const Seed& sd : pair) if (std::isfinite(sd.F)) detail::detect_trace("seed", sd.line, sd.F, sd.rank);
+      for (const Seed& sd : seeds) detail::detect_trace("refined", sd.line, sd.F, sd.spread);
+    }
     // A longer line reaches further across Φ: the score is the spread per unit length.
     const auto score = [](const Seed& sd) { return sd.spread / (sd.line.b - sd.line.a).norm(); };
     std::vector<size_t> by_spread(seeds.size());
@@ -535,6 +566,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
       // Refined lines are explored too: the refinement does not look at F_l, exploration does.
       const ExploredLine ex = explore_line(surface, s.line.a, s.line.b, o.patch.exploration);
       const LineTrajectory tr = propagate_line(surface, ex.a, ex.b, o.patch.propagation);
+      if (detail::detect_trace) detail::detect_trace("turn", s.line, s.F, s.spread), detail::detect_trace("explored", {ex.a, ex.b}, ex.movability.F, double(tr.a.size()));
       Candidate c = keep_uncovered(surface, tr, ex.a, covered, area, o);
       if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) continue;
       candidates.push_back(std::move(c));
@@ -567,6 +599,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
           ++out.seeds_tried;
           if (h.ok && (!f.ok || h.gain > f.gain)) f = std::move(h);
         }
+      if (detail::detect_trace) detail::detect_trace("fitted", {tr.a[0], tr.b[0]}, f.ok, f.gain);
       if (f.ok && f.gain > best.gain) best = std::move(f);
     }
     // A patch must bring a real share of the surface (0.5%) within tolerance.

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "core/movability.h"
 #include "core/patch.h"
 
 namespace flankcam {
@@ -18,6 +19,7 @@ struct CoverOptions {
   // `directions` line directions in the tangent plane, offset along ±normal by each radius.
   int seed_points = 48;
   int directions = 5;
+  int oriented_lines = 3;  // per seed point and side: the most movable lines turned to their least F_l (orient_line)
   std::vector<double> radii = {0.025, 0.05, 0.09};  // candidate tool radii (unit frame)
   int refined_seeds = 8;   // best-ranked seeds (half on each side of Φ) moved to the nearest axis per patch
   int sweep_steps = 20;    // a seed's short sweep each way (refinement score) ...
