@@ -14,8 +14,6 @@
 #include <cstdio>
 #include <algorithm>
 #include <string>
-#include <cstdlib>
-#include <functional>
 
 #include "core/blade.h"
 #include "core/detect.h"
@@ -23,9 +21,6 @@
 #include "core/mesh.h"
 
 using namespace flankcam;
-namespace flankcam::detail {
-extern std::function<void(const std::string&, const AxisLine&, double, double)> detect_trace;  // DEBUG
-}
 
 namespace {
 
@@ -264,12 +259,6 @@ void diagnose(const std::string& which, int meridian_cps, int rail_cps, bool off
   o.patch.tolerance = tol;
   o.patch.fit = fo;
   o.max_patches = 1;
-  if (std::getenv("TRACE"))
-    detail::detect_trace = [&](const std::string& what, const AxisLine& l, double x, double y) {
-      const LineError e = line_error(l.a, l.b);
-      fmt::print("  {:9} t {:.3f} angle {:6.2f} offset {:.2e} slide {:+.2e} len {:.3f}  {:.3e} {:.3e}\n", what, e.t, e.angle_deg, e.offset,
-                 e.slide, (l.b - l.a).norm(), x, y);
-    };
   const Detection d = detect_patches(surface, o);
   if (d.patches.empty()) {
     fmt::print("auto: no patch\n");

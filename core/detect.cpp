@@ -10,6 +10,7 @@
 #include <array>
 
 #include "core/errors.h"
+#include "core/movability.h"
 
 namespace flankcam {
 
@@ -79,10 +80,6 @@ UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machin
       }
     }
   return u;
-}
-
-namespace detail {
-std::function<void(const std::string&, const AxisLine&, double, double)> detect_trace;  // DEBUG
 }
 
 namespace {
@@ -572,10 +569,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
       report(oriented ? "refining oriented seed lines" : "refining seed lines");
 #pragma omp parallel for schedule(dynamic, 1)
       for (int k = 0; k < int(seeds.size()); ++k) seeds[size_t(k)] = refine_seed(surface, seeds[size_t(k)], o);
-      if (detail::detect_trace) {
-        for (const auto& ps : at_point) for (const Seed& sd : ps.best) if (sd.oriented == oriented && std::isfinite(sd.F)) detail::detect_trace("seed", sd.line, sd.F, sd.rank);
-        for (const Seed& sd : seeds) detail::detect_trace("refined", sd.line, sd.F, sd.spread);
-      }
       // A longer line reaches further across Φ: the score is the spread per unit length.
       const auto score = [](const Seed& sd) { return sd.spread / (sd.line.b - sd.line.a).norm(); };
       std::vector<size_t> by_spread(seeds.size());
@@ -604,7 +597,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
         // Refined lines are explored too: the refinement does not look at F_l, exploration does.
         const ExploredLine ex = explore_line(surface, s.line.a, s.line.b, o.patch.exploration);
         const LineTrajectory tr = propagate_line(surface, ex.a, ex.b, o.patch.propagation);
-        if (detail::detect_trace) detail::detect_trace("turn", s.line, s.F, s.spread), detail::detect_trace("explored", {ex.a, ex.b}, ex.movability.F, double(tr.a.size()));
         Candidate c = keep_uncovered(surface, tr, ex.a, covered, area, o);
         if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) continue;
         candidates.push_back(std::move(c));
@@ -639,7 +631,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
             ++out.seeds_tried;
             if (h.ok && (!f.ok || h.gain > f.gain)) f = std::move(h);
           }
-        if (detail::detect_trace) detail::detect_trace("fitted", {tr.a[0], tr.b[0]}, f.ok, f.gain);
         if (f.ok && f.gain > best.gain) best = std::move(f);
       }
     };

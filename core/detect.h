@@ -7,7 +7,6 @@
 #include <string>
 #include <vector>
 
-#include "core/movability.h"
 #include "core/patch.h"
 
 namespace flankcam {
