@@ -32,6 +32,7 @@ std::string CoverOptions::validate() const {
   if (fitted_seeds < 1 || fitted_seeds > explored_seeds + explored_unrefined)
     return "cover.fitted_seeds: 1 .. explored_seeds + explored_unrefined";
   if (oriented_refined < 0) return "cover.oriented_refined: must be >= 0";
+  if (!(orient_below >= 0 && orient_below <= 1)) return "cover.orient_below: must be in [0, 1]";
   if (oriented_explored < 0 || (oriented_explored > 0 && oriented_refined < oriented_explored))
     return "cover.oriented_explored: 0 .. oriented_refined";
   if (oriented_fitted < 0 || oriented_fitted > 2 * oriented_explored) return "cover.oriented_fitted: 0 .. 2 oriented_explored";
@@ -635,8 +636,11 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
       }
     };
     fit_best(candidates_of(false), o.fitted_seeds);
-    // When the seeded lines do not reach the coverage, the oriented ones are tried as well.
-    if (o.oriented_explored > 0 && !(best.ok && out.coverage + best.gain >= o.coverage)) {
+    // When the seeded lines' best patch brings less than `orient_below` of the uncovered area, they
+    // have likely missed the tool axis's direction (general tools) and the oriented ones are tried as
+    // well. Not always: a larger first patch is not a better cover (greedy), and the seeded lines
+    // serve conical and cylindrical tools well.
+    if (o.oriented_explored > 0 && !(best.ok && best.gain >= o.orient_below * (1 - out.coverage))) {
       report("orienting seed lines");
 #pragma omp parallel for schedule(dynamic, 1)
       for (int k = 0; k < int(at_point.size()); ++k) orient_seeds(surface, at_point[size_t(k)], o);

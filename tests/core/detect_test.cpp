@@ -81,7 +81,8 @@ TEST_CASE("auto detection covers an exact envelope with one patch within 1e-4 of
 TEST_CASE("auto detection covers spline-tool envelopes with one patch: the seeds find the tilted axis") {
   // The general (spline) tool's meridian is far from a cone: its axis leaves Φ's tangent plane and
   // is not a principal direction, so seeds in the tangent plane ranked wrong lines first (s-curve:
-  // 4 patches covering 15%, helix: 5 patches) before they were turned to their least F_l.
+  // 4 patches covering 15%, helix: 5 patches). When the seeded lines' best patch brings little, the
+  // seeds turned to their least F_l (orient_line) are tried as a second pool.
   const RadiusProfile spline = spline_profile({5.0, 6.5, 7.5, 6.5, 7.0, 8.5});
   for (const std::string kind : {"s-curve", "helix"}) {
     CAPTURE(kind);
@@ -171,6 +172,20 @@ TEST_CASE("cover options name the bad field") {
   o = {};
   o.max_patches = 0;
   CHECK(o.validate().find("cover.max_patches") != std::string::npos);
+  o = {};
+  o.orient_below = 1.5;
+  CHECK(o.validate().find("cover.orient_below") != std::string::npos);
+  o = {};
+  o.oriented_fitted = 2 * o.oriented_explored + 1;
+  CHECK(o.validate().find("cover.oriented_fitted") != std::string::npos);
+  o = {};
+  o.oriented_lines = 0;
+  CHECK(o.validate().find("cover.oriented_lines") != std::string::npos);
+  o.oriented_explored = 0;
+  o.oriented_fitted = 0;
+  CHECK(o.validate().empty());  // no oriented pool
+  o = {};
+  o.max_patches = 0;
   test::ExactEnvelope ex = test::exact_envelope("arc", cylinder_profile(6), 20, 40);
   const SurfaceIndex surface(ex.unit_mesh);
   CHECK_THROWS_AS((void)detect_patches(surface, o), InputError);
