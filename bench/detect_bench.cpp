@@ -3,7 +3,7 @@
 //   detect_bench envelopes [auto|line] the 16 exact envelopes (4 motions x 4 tools): coverage within 1e-4 of the
 //                                      diagonal, worst overcut; line: one line perturbed by 1% and 2 degrees
 //   detect_bench mesh FILE TOL_MM      auto cover of a mesh (mm), coverage within TOL_MM
-//   detect_bench diag KIND/TOOL [MERIDIAN_CPS [RAIL_CPS]]  diagnosis of one exact envelope: oracle fit from the
+//   detect_bench diag KIND/TOOL [MERIDIAN_CPS [RAIL_CPS [N_S N_T]]]  diagnosis of one exact envelope: oracle fit from the
 //                                      exact motion, the first auto patch against it, maps of where it misses
 //   detect_bench diag-offsets KIND/TOOL  F_l and the short-sweep radius spread of lines parallel to the exact axis
 #include <fmt/format.h>
@@ -148,7 +148,7 @@ void print_miss_map(const std::vector<double>& dev, int n_s, int n_t, double tol
 // Per-case diagnosis of one exact envelope: an oracle fit from the exact axis motion (can the
 // optimiser and the tool representation reach 1e-4 at all?), then the auto detection's first patch
 // against the exact motion (seed, propagation reach and drift, fit errors, t-trim, where it misses).
-void diagnose(const std::string& which, int meridian_cps, int rail_cps, bool offsets) {
+void diagnose(const std::string& which, int meridian_cps, int rail_cps, bool offsets, int n_s, int n_t) {
   const std::vector<std::pair<const char*, RadiusProfile>> tools = {{"cylinder", cylinder_profile(6)},
                                                                     {"cone", cone_profile(6, 9)},
                                                                     {"barrel", barrel_profile(6, 1.5)},
@@ -161,7 +161,7 @@ void diagnose(const std::string& which, int meridian_cps, int rail_cps, bool off
   AnalyticMotionOptions mo;
   mo.kind = kind;
   const LineMotion motion = analytic_motion(mo);
-  const EnvelopeGrid g = envelope_grid(motion, profile, 66, 200, 1);
+  const EnvelopeGrid g = envelope_grid(motion, profile, n_s, n_t, 1);
   const Similarity frame = unit_diagonal_frame(g.mesh);
   const SurfaceIndex surface(transformed(g.mesh, frame));
   const double tol = 1e-4;
@@ -323,7 +323,8 @@ int main(int argc, char** argv) {
   if (mode == "envelopes") {
     envelopes(argc > 2 && std::string(argv[2]) == "line", argc > 3 ? argv[3] : "");
   } else if ((mode == "diag" || mode == "diag-offsets") && argc > 2) {
-    diagnose(argv[2], argc > 3 ? std::stoi(argv[3]) : 10, argc > 4 ? std::stoi(argv[4]) : 16, mode == "diag-offsets");
+    diagnose(argv[2], argc > 3 ? std::stoi(argv[3]) : 10, argc > 4 ? std::stoi(argv[4]) : 16, mode == "diag-offsets",
+             argc > 5 ? std::stoi(argv[5]) : 66, argc > 6 ? std::stoi(argv[6]) : 200);
   } else if (mode == "mesh" && argc > 3) {
     cover_mesh(load_mesh(argv[2]).mesh, std::stod(argv[3]), argv[2]);
   } else {

@@ -10,6 +10,7 @@
 #include <array>
 
 #include "core/errors.h"
+#include "core/movability.h"
 
 namespace flankcam {
 
@@ -27,8 +28,15 @@ std::string CoverOptions::validate() const {
   if (!(sweep_step > 0 && sweep_step < 0.1)) return "cover.sweep_step: must be in (0, 0.1)";
   if (refine_evaluations < 0) return "cover.refine_evaluations: must be >= 0";
   if (explored_unrefined < 0) return "cover.explored_unrefined: must be >= 0";
+  if (oriented_lines < 0) return "cover.oriented_lines: must be >= 0";
   if (fitted_seeds < 1 || fitted_seeds > explored_seeds + explored_unrefined)
     return "cover.fitted_seeds: 1 .. explored_seeds + explored_unrefined";
+  if (oriented_refined < 0) return "cover.oriented_refined: must be >= 0";
+  if (!(orient_below >= 0 && orient_below <= 1)) return "cover.orient_below: must be in [0, 1]";
+  if (oriented_explored < 0 || (oriented_explored > 0 && oriented_refined < oriented_explored))
+    return "cover.oriented_explored: 0 .. oriented_refined";
+  if (oriented_fitted < 0 || oriented_fitted > 2 * oriented_explored) return "cover.oriented_fitted: 0 .. 2 oriented_explored";
+  if (oriented_explored > 0 && oriented_lines < 1) return "cover.oriented_lines: at least 1 when oriented seeds are explored";
   if (!(band >= 0) || !std::isfinite(band)) return "cover.band: must be >= 0";
   if (lines < 2) return "cover.lines: at least 2";
   if (!(patch.tolerance > 0)) return "tolerance: must be positive";
@@ -102,6 +110,30 @@ struct Seed {
   int vertex = -1;
   int side = 0;  // +1: the line lies on the side Φ's normals point to
   double spread = std::numeric_limits<double>::infinity();  // sweep_spread of the refined line
+  bool oriented = false;  // turned to its least F_l (orient_line)
+  void take(const struct SeedLine& l);
+};
+
+// A candidate line at a seed point: turned about `pivot` by orient_seeds.
+struct SeedLine {
+  AxisLine line;
+  Eigen::Vector3d pivot;
+  double F, rank;
+};
+
+void Seed::take(const SeedLine& l) {
+  if (l.rank < rank) {
+    rank = l.rank;
+    F = l.F;
+    line = l.line;
+  }
+}
+
+// Per seed point: best[0], best[1] the most movable line as seeded on side -1, +1 of Φ; best[2],
+// best[3] the oriented ones (orient_seeds); top: per side the best-ranked lines, to be oriented.
+struct PointSeeds {
+  std::array<Seed, 4> best;
+  std::array<std::vector<SeedLine>, 2> top;
 };
 
 // Principal directions from the change of the vertex normals over the two-ring (dn = W dx in the
@@ -151,8 +183,8 @@ Principal principal_at(const SurfaceIndex& surface, const std::vector<std::vecto
 // Sec. 4.1 over the whole surface: at a seed point, lines around the least-curvature direction,
 // offset along the normal by the candidate radii (and by the radius of curvature towards its
 // centre), each as long as the surface reaches along it; the most movable one on each side of Φ.
-std::array<Seed, 2> best_lines_at(const SurfaceIndex& surface, const std::vector<std::vector<int>>& ring, int v,
-                                  const CoverOptions& o) {
+PointSeeds best_lines_at(const SurfaceIndex& surface, const std::vector<std::vector<int>>& ring, int v,
+                         const CoverOptions& o) {
   const Eigen::Vector3d p = surface.mesh().vertices[size_t(v)], n = surface.normals()[size_t(v)];
   Eigen::Index k;
   n.cwiseAbs().minCoeff(&k);
@@ -176,10 +208,7 @@ std::array<Seed, 2> best_lines_at(const SurfaceIndex& surface, const std::vector
       dirs.push_back(std::cos(phi) * t1 + std::sin(phi) * t2);
     }
   }
-  std::array<Seed, 2> best;  // per side: -1, +1
-  best[0].vertex = best[1].vertex = v;
-  best[0].side = -1;
-  best[1].side = 1;
+  std::array<std::vector<SeedLine>, 2> lines;  // per side: -1, +1
   constexpr int reach_samples = 121;  // 0.0125 apart: a line as short as 0.05 of the diagonal is seen
   constexpr double reach = 0.75;  // half-length of the probe line (unit frame)
   const auto u_of = [&](int i) { return -reach + 2 * reach * i / (reach_samples - 1); };
@@ -215,16 +244,42 @@ std::array<Seed, 2> best_lines_at(const SurfaceIndex& surface, const std::vector
         if (!m.movable || m.used_samples * 5 < 4 * o.patch.exploration.movability.samples) continue;
         // Below ~1e-8 (angles ~1e-4 rad) F_l is tessellation noise: among such lines the longest
         // reaches furthest across Φ, so the rank is F_l floored there, per unit length.
-        const double rank = std::max(m.F, kMovableF) / (u1 - u0);
-        Seed& b = best[side > 0 ? 1 : 0];
-        if (rank < b.rank) {
-          b.rank = rank;
-          b.F = m.F;
-          b.line = line;
-        }
+        lines[side > 0 ? 1 : 0].push_back(SeedLine{line, c, m.F, std::max(m.F, kMovableF) / (u1 - u0)});
       }
   }
-  return best;
+  PointSeeds out;
+  for (int k = 0; k < 4; ++k) {
+    out.best[size_t(k)].vertex = v;
+    out.best[size_t(k)].side = k % 2 == 0 ? -1 : 1;
+    out.best[size_t(k)].oriented = k >= 2;
+  }
+  for (int s = 0; s < 2; ++s) {
+    auto& ls = lines[size_t(s)];
+    std::stable_sort(ls.begin(), ls.end(), [](const SeedLine& x, const SeedLine& y) { return x.rank < y.rank; });
+    if (!ls.empty()) out.best[size_t(s)].take(ls.front());
+    ls.resize(std::min(ls.size(), size_t(o.oriented_lines)));
+    out.top[size_t(s)] = std::move(ls);
+  }
+  return out;
+}
+
+// The best `oriented_lines` of each side turned about their seed point to their least F_l
+// (orient_line) and the most movable of them kept as the point's oriented seeds: a general tool's
+// axis leaves the tangent plane and is no principal direction; lines in the tangent plane miss it
+// by its slope r'(s) and rank behind lines that are no axis.
+void orient_seeds(const SurfaceIndex& surface, PointSeeds& ps, const CoverOptions& o) {
+  OrientationOptions orientation;
+  orientation.movability = o.patch.exploration.movability;
+  for (int s = 0; s < 2; ++s)
+    for (SeedLine l : ps.top[size_t(s)]) {
+      if (l.F > kMovableF) {
+        const OrientedLine ol = orient_line(surface, l.line.a, l.line.b, l.pivot, orientation);
+        l.line = {ol.a, ol.b};
+        l.rank *= std::max(ol.movability.F, kMovableF) / std::max(l.F, kMovableF);
+        l.F = ol.movability.F;
+      }
+      ps.best[size_t(2 + s)].take(l);
+    }
 }
 
 // How far a line is from a tool axis: the line is swept a short way in both directions along its best
@@ -488,92 +543,114 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
     progress.seeds = int(points.size());
     progress.seed = 0;
     report("seeding");
-    std::vector<std::array<Seed, 2>> at_point(points.size());
+    std::vector<PointSeeds> at_point(points.size());
 #pragma omp parallel for schedule(dynamic, 1)
     for (int k = 0; k < int(points.size()); ++k) at_point[size_t(k)] = best_lines_at(surface, ring, points[size_t(k)], o);
-    // The best-ranked lines of each side of Φ (which side the tool is on is not known here) are moved
-    // to the nearest axis (refine_seed) and ranked again by how well they keep their distances.
-    std::vector<Seed> seeds;
-    for (int side : {1, -1}) {
-      std::vector<Seed> one;
-      for (const auto& pair : at_point)
-        for (const Seed& sd : pair)
-          if (sd.side == side && std::isfinite(sd.F)) one.push_back(sd);
-      std::stable_sort(one.begin(), one.end(), [](const Seed& x, const Seed& y) { return x.rank < y.rank; });
-      one.resize(std::min(one.size(), size_t((o.refined_seeds + 1) / 2)));
-      seeds.insert(seeds.end(), one.begin(), one.end());
-    }
-    progress.seeds = int(seeds.size());
-    report("refining seed lines");
+    bool any_seed = false;
+    for (const auto& ps : at_point)
+      for (const Seed& sd : ps.best) any_seed |= std::isfinite(sd.F);
+    // Candidate trajectories from one pool of seeds: the lines as seeded, or the oriented ones.
+    const auto candidates_of = [&](bool oriented) {
+      const int refined_count = oriented ? o.oriented_refined : o.refined_seeds;
+      const int explored_count = oriented ? o.oriented_explored : o.explored_seeds;
+      const int unrefined_count = oriented ? o.oriented_explored : o.explored_unrefined;
+      std::vector<Candidate> candidates;
+      // The best-ranked lines of each side of Φ (which side the tool is on is not known here) are moved
+      // to the nearest axis (refine_seed) and ranked again by how well they keep their distances.
+      std::vector<Seed> seeds;
+      for (int side : {1, -1}) {
+        std::vector<Seed> one;
+        for (const auto& ps : at_point)
+          for (const Seed& sd : ps.best)
+            if (sd.oriented == oriented && sd.side == side && std::isfinite(sd.F)) one.push_back(sd);
+        std::stable_sort(one.begin(), one.end(), [](const Seed& x, const Seed& y) { return x.rank < y.rank; });
+        one.resize(std::min(one.size(), size_t((refined_count + 1) / 2)));
+        seeds.insert(seeds.end(), one.begin(), one.end());
+      }
+      progress.seeds = int(seeds.size());
+      report(oriented ? "refining oriented seed lines" : "refining seed lines");
 #pragma omp parallel for schedule(dynamic, 1)
-    for (int k = 0; k < int(seeds.size()); ++k) seeds[size_t(k)] = refine_seed(surface, seeds[size_t(k)], o);
-    // A longer line reaches further across Φ: the score is the spread per unit length.
-    const auto score = [](const Seed& sd) { return sd.spread / (sd.line.b - sd.line.a).norm(); };
-    std::vector<size_t> by_spread(seeds.size());
-    std::iota(by_spread.begin(), by_spread.end(), size_t(0));
-    std::stable_sort(by_spread.begin(), by_spread.end(), [&](size_t x, size_t y) { return score(seeds[x]) < score(seeds[y]); });
-    // Where the motion is close to a screw (helices) the spread cannot tell lines apart either; the
-    // most movable unrefined lines, explored as in Sec. 4.2, are candidates too. Refined and
-    // unrefined lines take turns.
-    std::vector<Seed> unrefined;
-    for (const auto& pair : at_point)
-      for (const Seed& sd : pair)
-        if (std::isfinite(sd.F)) unrefined.push_back(sd);
-    std::stable_sort(unrefined.begin(), unrefined.end(), [](const Seed& x, const Seed& y) { return x.rank < y.rank; });
-    std::vector<Seed> turns;
-    for (size_t r = 0; r < std::max(by_spread.size(), unrefined.size()); ++r) {
-      if (r < by_spread.size() && int(r) < o.explored_seeds && std::isfinite(seeds[by_spread[r]].spread))
-        turns.push_back(seeds[by_spread[r]]);
-      if (r < unrefined.size() && int(r) < o.explored_unrefined) turns.push_back(unrefined[r]);
-    }
-    std::vector<Candidate> candidates;
-    for (size_t r = 0; r < turns.size(); ++r) {
-      const Seed& s = turns[r];
-      tried[size_t(s.vertex)] = 1;
-      progress.seed = int(r) + 1;
-      progress.seeds = int(turns.size());
-      report("exploring and propagating");
-      // Refined lines are explored too: the refinement does not look at F_l, exploration does.
-      const ExploredLine ex = explore_line(surface, s.line.a, s.line.b, o.patch.exploration);
-      const LineTrajectory tr = propagate_line(surface, ex.a, ex.b, o.patch.propagation);
-      Candidate c = keep_uncovered(surface, tr, ex.a, covered, area, o);
-      if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) continue;
-      candidates.push_back(std::move(c));
-    }
-    std::vector<size_t> by_sweep(candidates.size());
-    std::iota(by_sweep.begin(), by_sweep.end(), size_t(0));
-    std::stable_sort(by_sweep.begin(), by_sweep.end(),
-                     [&](size_t x, size_t y) { return candidates[x].uncovered_swept > candidates[y].uncovered_swept; });
+      for (int k = 0; k < int(seeds.size()); ++k) seeds[size_t(k)] = refine_seed(surface, seeds[size_t(k)], o);
+      // A longer line reaches further across Φ: the score is the spread per unit length.
+      const auto score = [](const Seed& sd) { return sd.spread / (sd.line.b - sd.line.a).norm(); };
+      std::vector<size_t> by_spread(seeds.size());
+      std::iota(by_spread.begin(), by_spread.end(), size_t(0));
+      std::stable_sort(by_spread.begin(), by_spread.end(), [&](size_t x, size_t y) { return score(seeds[x]) < score(seeds[y]); });
+      // Where the motion is close to a screw (helices) the spread cannot tell lines apart either; the
+      // most movable unrefined lines, explored as in Sec. 4.2, are candidates too. Refined and
+      // unrefined lines take turns.
+      std::vector<Seed> unrefined;
+      for (const auto& ps : at_point)
+        for (const Seed& sd : ps.best)
+          if (sd.oriented == oriented && std::isfinite(sd.F)) unrefined.push_back(sd);
+      std::stable_sort(unrefined.begin(), unrefined.end(), [](const Seed& x, const Seed& y) { return x.rank < y.rank; });
+      std::vector<Seed> turns;
+      for (size_t r = 0; r < std::max(by_spread.size(), unrefined.size()); ++r) {
+        if (r < by_spread.size() && int(r) < explored_count && std::isfinite(seeds[by_spread[r]].spread))
+          turns.push_back(seeds[by_spread[r]]);
+        if (r < unrefined.size() && int(r) < unrefined_count) turns.push_back(unrefined[r]);
+      }
+      for (size_t r = 0; r < turns.size(); ++r) {
+        const Seed& s = turns[r];
+        tried[size_t(s.vertex)] = 1;
+        progress.seed = int(r) + 1;
+        progress.seeds = int(turns.size());
+        report(oriented ? "exploring and propagating oriented seeds" : "exploring and propagating");
+        // Refined lines are explored too: the refinement does not look at F_l, exploration does.
+        const ExploredLine ex = explore_line(surface, s.line.a, s.line.b, o.patch.exploration);
+        const LineTrajectory tr = propagate_line(surface, ex.a, ex.b, o.patch.propagation);
+        Candidate c = keep_uncovered(surface, tr, ex.a, covered, area, o);
+        if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) continue;
+        candidates.push_back(std::move(c));
+      }
+      // The candidates sweeping the most uncovered area first.
+      std::stable_sort(candidates.begin(), candidates.end(),
+                       [](const Candidate& x, const Candidate& y) { return x.uncovered_swept > y.uncovered_swept; });
+      return candidates;
+    };
     Fitted best;
-    for (size_t r = 0; r < by_sweep.size() && int(r) < o.fitted_seeds; ++r) {
-      // Enough already.
-      if (best.ok && out.coverage + best.gain >= o.coverage) break;
-      report("fitting candidate " + std::to_string(r + 1));
-      const LineTrajectory& tr = candidates[by_sweep[r]].trajectory;
-      Fitted f = fit_candidate(surface, tr, covered, area, o);
-      ++out.seeds_tried;
-      // A sweep too long for one envelope within tolerance (it gouges all along, or brings little):
-      // its halves are fitted instead (shorter motions bend less).
-      const size_t half = tr.a.size() / 2;
-      if ((!f.ok || f.gain < 0.02) && half >= size_t(2 * o.patch.fit.rail_control_points))
-        for (int piece = 0; piece < 2; ++piece) {
-          LineTrajectory part;
-          const size_t from = piece == 0 ? 0 : half, to = piece == 0 ? half + half / 10 : tr.a.size();
-          const size_t lo = piece == 0 ? from : from - half / 10;  // a small overlap between the halves
-          part.a.assign(tr.a.begin() + long(lo), tr.a.begin() + long(to));
-          part.b.assign(tr.b.begin() + long(lo), tr.b.begin() + long(to));
-          part.F.assign(tr.F.begin() + long(lo), tr.F.begin() + long(to));
-          report("fitting candidate " + std::to_string(r + 1) + ", half " + std::to_string(piece + 1));
-          Fitted h = fit_candidate(surface, part, covered, area, o);
-          ++out.seeds_tried;
-          if (h.ok && (!f.ok || h.gain > f.gain)) f = std::move(h);
-        }
-      if (f.ok && f.gain > best.gain) best = std::move(f);
+    const auto fit_best = [&](const std::vector<Candidate>& candidates, int count) {
+      for (size_t r = 0; r < candidates.size() && int(r) < count; ++r) {
+        // Enough already.
+        if (best.ok && out.coverage + best.gain >= o.coverage) break;
+        report("fitting candidate " + std::to_string(r + 1));
+        const LineTrajectory& tr = candidates[r].trajectory;
+        Fitted f = fit_candidate(surface, tr, covered, area, o);
+        ++out.seeds_tried;
+        // A sweep too long for one envelope within tolerance (it gouges all along, or brings little):
+        // its halves are fitted instead (shorter motions bend less).
+        const size_t half = tr.a.size() / 2;
+        if ((!f.ok || f.gain < 0.02) && half >= size_t(2 * o.patch.fit.rail_control_points))
+          for (int piece = 0; piece < 2; ++piece) {
+            LineTrajectory part;
+            const size_t from = piece == 0 ? 0 : half, to = piece == 0 ? half + half / 10 : tr.a.size();
+            const size_t lo = piece == 0 ? from : from - half / 10;  // a small overlap between the halves
+            part.a.assign(tr.a.begin() + long(lo), tr.a.begin() + long(to));
+            part.b.assign(tr.b.begin() + long(lo), tr.b.begin() + long(to));
+            part.F.assign(tr.F.begin() + long(lo), tr.F.begin() + long(to));
+            report("fitting candidate " + std::to_string(r + 1) + ", half " + std::to_string(piece + 1));
+            Fitted h = fit_candidate(surface, part, covered, area, o);
+            ++out.seeds_tried;
+            if (h.ok && (!f.ok || h.gain > f.gain)) f = std::move(h);
+          }
+        if (f.ok && f.gain > best.gain) best = std::move(f);
+      }
+    };
+    fit_best(candidates_of(false), o.fitted_seeds);
+    // When the seeded lines' best patch brings less than `orient_below` of the uncovered area, they
+    // have likely missed the tool axis's direction (general tools) and the oriented ones are tried as
+    // well. Not always: a larger first patch is not a better cover (greedy), and the seeded lines
+    // serve conical and cylindrical tools well.
+    if (o.oriented_explored > 0 && !(best.ok && best.gain >= o.orient_below * (1 - out.coverage))) {
+      report("orienting seed lines");
+#pragma omp parallel for schedule(dynamic, 1)
+      for (int k = 0; k < int(at_point.size()); ++k) orient_seeds(surface, at_point[size_t(k)], o);
+      fit_best(candidates_of(true), o.oriented_fitted);
     }
     // A patch must bring a real share of the surface (0.5%) within tolerance.
     if (!best.ok || best.gain < 0.005) {
       // Nothing from these seeds: the next round takes the next-best ones (these are marked tried).
-      if (++failures >= 3 || seeds.empty()) break;
+      if (++failures >= 3 || !any_seed) break;
       continue;
     }
     failures = 0;

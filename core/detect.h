@@ -18,6 +18,14 @@ struct CoverOptions {
   // `directions` line directions in the tangent plane, offset along ±normal by each radius.
   int seed_points = 48;
   int directions = 5;
+  // When the best fit from these seeds brings less than `orient_below` of the uncovered area: per
+  // seed point and side, the most movable `oriented_lines` turned to their least F_l (orient_line),
+  // refined, explored and fitted as above (general tools: their axis leaves the tangent plane).
+  double orient_below = 0.4;
+  int oriented_lines = 3;
+  int oriented_refined = 8;
+  int oriented_explored = 3;  // refined and unrefined each
+  int oriented_fitted = 3;
   std::vector<double> radii = {0.025, 0.05, 0.09};  // candidate tool radii (unit frame)
   int refined_seeds = 8;   // best-ranked seeds (half on each side of Φ) moved to the nearest axis per patch
   int sweep_steps = 20;    // a seed's short sweep each way (refinement score) ...

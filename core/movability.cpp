@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <random>
+#include <tuple>
 
 #include "core/errors.h"
 
@@ -50,6 +51,15 @@ std::string ExplorationOptions::validate() const {
   if (!(radius > 0)) return "radius: must be positive";
   if (!(shrink > 0 && shrink < 1)) return "shrink: must be between 0 and 1";
   if (!(good_enough >= 0)) return "good_enough: must be >= 0";
+  return {};
+}
+
+std::string OrientationOptions::validate() const {
+  if (auto e = movability.validate(); !e.empty()) return e;
+  if (!(first_step_deg > 0 && first_step_deg <= 45)) return "first_step_deg: must be in (0, 45]";
+  if (!(last_step_deg > 0 && last_step_deg <= first_step_deg)) return "last_step_deg: must be in (0, first_step_deg]";
+  if (max_evaluations < 0) return "max_evaluations: must be >= 0";
+  if (!(min_inside_share >= 0 && min_inside_share <= 1)) return "min_inside_share: must be in [0, 1]";
   return {};
 }
 
@@ -204,6 +214,57 @@ ExploredLine explore_line(const SurfaceIndex& surface, const Eigen::Vector3d& a0
     }
   }
   return best;
+}
+
+OrientedLine orient_line(const SurfaceIndex& surface, const Eigen::Vector3d& a0, const Eigen::Vector3d& b0,
+                         const Eigen::Vector3d& pivot, const OrientationOptions& o) {
+  if (auto err = o.validate(); !err.empty()) throw InputError("orientation." + err);
+  OrientedLine out;
+  out.a = a0;
+  out.b = b0;
+  out.movability = line_movability(surface, a0, b0, o.movability);
+  out.lines_evaluated = 1;
+  const double L = (b0 - a0).norm();
+  if (!(L > 0)) return out;
+  const Eigen::Vector3d e0 = (b0 - a0) / L;
+  // The line as pivot + u e with u in [u0, u1]; turning it keeps u0, u1.
+  const double u0 = (a0 - pivot).dot(e0), u1 = (b0 - pivot).dot(e0);
+  const Eigen::Vector3d base = pivot + (a0 - pivot - u0 * e0);  // pivot moved onto the line
+  const auto [n1, n2] = normal_plane(e0);
+  const auto acceptable = [&](const Movability& m) {
+    return m.movable && m.used_samples >= o.min_inside_share * o.movability.samples;
+  };
+  const auto line_at = [&](const Eigen::Vector2d& x) {
+    const Eigen::Vector3d e = (e0 + std::tan(x[0]) * n1 + std::tan(x[1]) * n2).normalized();
+    return std::make_pair(Eigen::Vector3d(base + u0 * e), Eigen::Vector3d(base + u1 * e));
+  };
+  Eigen::Vector2d best = Eigen::Vector2d::Zero();
+  double best_F = acceptable(out.movability) ? out.movability.F : std::numeric_limits<double>::infinity();
+  double h = o.first_step_deg * M_PI / 180;
+  const double h_min = o.last_step_deg * M_PI / 180;
+  while (h >= h_min * (1 - 1e-9) && out.lines_evaluated <= o.max_evaluations) {
+    Eigen::Vector2d step_best = best;
+    double step_F = best_F;
+    Movability step_m;
+    for (int i = 0; i < 2; ++i)
+      for (int sign : {-1, 1}) {
+        Eigen::Vector2d x = best;
+        x[i] += sign * h;
+        const auto [a, b] = line_at(x);
+        Movability m = line_movability(surface, a, b, o.movability);
+        ++out.lines_evaluated;
+        if (acceptable(m) && m.F < step_F) step_F = m.F, step_best = x, step_m = std::move(m);
+      }
+    if (step_F < best_F) {
+      best = step_best;
+      best_F = step_F;
+      std::tie(out.a, out.b) = line_at(best);
+      out.movability = std::move(step_m);
+    } else {
+      h *= 0.5;
+    }
+  }
+  return out;
 }
 
 namespace {

@@ -64,6 +64,28 @@ struct ExploredLine {
 [[nodiscard]] ExploredLine explore_line(const SurfaceIndex& surface, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
                                         const ExplorationOptions& options = {});
 
+struct OrientationOptions {
+  MovabilityOptions movability;
+  double first_step_deg = 4.0;   // pattern search over the line's direction: first angle step ...
+  double last_step_deg = 0.25;   // ... halved down to this
+  int max_evaluations = 40;
+  double min_inside_share = 0.8;  // a candidate direction must keep this share of samples over Φ
+  std::string validate() const;
+};
+
+struct OrientedLine {
+  Eigen::Vector3d a, b;
+  Movability movability;
+  int lines_evaluated = 0;
+};
+// The direction of a finite line that minimises F_l (eq. 5) when the line turns about its point
+// `pivot` (length kept): a pattern search over two angles normal to the line. Where the tool's
+// meridian is far from a cylinder the axis leaves the tangent plane (its slope is the meridian's
+// r'(s), eq. 3) and its direction is not a principal direction of Φ; F_l tells it, because it
+// grows with the square of the direction's error while it hardly changes with the line's offset.
+[[nodiscard]] OrientedLine orient_line(const SurfaceIndex& surface, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                                       const Eigen::Vector3d& pivot, const OrientationOptions& options = {});
+
 struct PropagationOptions {
   MovabilityOptions movability;
   double step = 0.001;            // of the normalised midpoint velocity (Sec. 4.3)

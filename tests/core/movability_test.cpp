@@ -3,8 +3,11 @@
 #include <doctest/doctest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
+#include <cmath>
 
 #include "core/envelope.h"
+#include "core/errors.h"
 #include "core/patch.h"
 #include "tests/test_util.h"
 
@@ -134,4 +137,42 @@ TEST_CASE("line-driven: a spline tool on an s-curve from a line 1% and 2 degrees
   for (double d : f.machined.design_deviation)
     if (std::isfinite(d)) overcut = std::max(overcut, -d);
   CHECK(overcut <= 1e-4);
+}
+
+TEST_CASE("orient_line turns a line about its pivot to a lower F_l") {
+  // The spline tool's meridian is far from a cone: its axis leaves Φ's tangent plane (the slope
+  // r'(s)). A line through the axis point at t = 0.3, turned by 6 degrees about it, is turned back
+  // towards lower F_l. (F_l alone does not fix the direction: where the motion is nearly a
+  // translation every line moving along it is movable, so the angle is not asserted.)
+  const Exact ex = exact_envelope("s-curve", spline_profile({5.0, 6.5, 7.5, 6.5, 7.0, 8.5}));
+  const Eigen::Vector3d a = ex.frame.to_unit(ex.motion.a(0.3)), b = ex.frame.to_unit(ex.motion.b(0.3));
+  const Eigen::Vector3d mid = 0.5 * (a + b), e = (b - a).normalized();
+  const double L = (b - a).norm();
+  for (const Eigen::Vector3d& about : {Eigen::Vector3d(e.unitOrthogonal()), Eigen::Vector3d(e.cross(e.unitOrthogonal()))}) {
+    const Eigen::Vector3d d = Eigen::AngleAxisd(6 * M_PI / 180, about) * e;
+    const Eigen::Vector3d a0 = mid - 0.5 * L * d, b0 = mid + 0.5 * L * d;
+    const Movability m0 = line_movability(ex.surface, a0, b0);
+    const OrientedLine ol = orient_line(ex.surface, a0, b0, mid);
+    CHECK(ol.movability.movable);
+    CHECK(ol.movability.F < 0.5 * m0.F);
+    CHECK(ol.movability.F == doctest::Approx(line_movability(ex.surface, ol.a, ol.b).F));
+    CHECK((ol.b - ol.a).norm() == doctest::Approx(L));
+    // Turned about the pivot: it stays on the line.
+    const Eigen::Vector3d u = (ol.b - ol.a).normalized();
+    CHECK(((mid - ol.a) - (mid - ol.a).dot(u) * u).norm() < 1e-12);
+    CHECK(ol.lines_evaluated > 4);
+    CHECK(ol.lines_evaluated <= OrientationOptions{}.max_evaluations + 4);
+  }
+}
+
+TEST_CASE("orientation options name the bad field") {
+  OrientationOptions o;
+  CHECK(o.validate().empty());
+  o.last_step_deg = 10;
+  CHECK(o.validate().find("last_step_deg") != std::string::npos);
+  o = {};
+  o.first_step_deg = 0;
+  CHECK(o.validate().find("first_step_deg") != std::string::npos);
+  const Exact ex = exact_envelope("arc", cylinder_profile(6));
+  CHECK_THROWS_AS((void)orient_line(ex.surface, {0, 0, 0}, {1, 0, 0}, {0, 0, 0}, o), InputError);
 }
