@@ -589,10 +589,16 @@ SurfaceIndex::Impl::Hit SurfaceIndex::Impl::search(const Eigen::Vector3d& p, int
     leaf_bound4(bounds[size_t(first / kLeafFaces)], x, y, z, leaf_margin, lb);
     // The lanes still in question (bit j: face j's bound is within the prune radius), nearest
     // bound first; most leaves visited near the answer have none or one.
+    const int lanes = (1 << count) - 1;
     const auto open = [&] {
+#ifdef __SSE2__
+      return _mm_movemask_ps(_mm_cmple_ps(_mm_mul_ps(_mm_load_ps(lb), _mm_set1_ps(float(1 - 4 * kFloatError))),
+                                          _mm_set1_ps(prune2))) & lanes;
+#else
       int mask = 0;
       for (int j = 0; j < count; ++j) mask |= (lb[j] * float(1 - 4 * kFloatError) <= prune2) << j;
       return mask;
+#endif
     };
     for (int mask = open(); mask != 0; mask = open()) {
       int j = __builtin_ctz(unsigned(mask));
@@ -789,8 +795,8 @@ std::vector<Footpoint> SurfaceIndex::closest(const std::vector<Eigen::Vector3d>&
 #pragma omp for schedule(static)
     for (long j = 0; j < n; ++j) {
       // The point and the answer of a query a few ahead are fetched while this one is searched.
-      if (j + 8 < n) {
-        const long ahead = index(j + 8);
+      if (j + 32 < n) {
+        const long ahead = index(j + 32);
         __builtin_prefetch(&points[size_t(ahead)]);
         __builtin_prefetch(&out[size_t(ahead)], 1);
         __builtin_prefetch(reinterpret_cast<const char*>(&out[size_t(ahead)]) + sizeof(Footpoint) - 1, 1);
