@@ -9,7 +9,9 @@
 // and the ratios are of CPU-second rates (steadier on a shared machine). flankcam's batch call
 // answers in Morton order; CGAL is timed in the given order and in that same Morton order, so the
 // like-for-like ratio (r.M) is printed beside the one for the queries as given.
-// Usage: closest_point_bench [max_vertices]  (default 1,100,000: all four sizes)
+// Usage: closest_point_bench [max_vertices [min_vertices [offset [flankcam]]]]
+//   default: all four sizes (max 1,100,000), every offset; `offset` (e.g. 0): that offset only;
+//   `flankcam`: leave CGAL out (for profiling flankcam's search alone).
 #include <fmt/format.h>
 #include <omp.h>
 
@@ -20,6 +22,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <ctime>
 #include <random>
 #include <string>
@@ -86,6 +89,9 @@ std::vector<long> morton_order(const std::vector<Eigen::Vector3d>& q, const TriM
 
 int main(int argc, char** argv) {
   const long max_vertices = argc > 1 ? std::stol(argv[1]) : 1'100'000;
+  const long min_vertices = argc > 2 ? std::stol(argv[2]) : 0;
+  const double only_offset = argc > 3 ? std::stod(argv[3]) : -1;
+  const bool with_cgal = !(argc > 4 && std::string(argv[4]) == "flankcam");
   fmt::print("closest_point_bench: {} threads; q/s wall clock and q per CPU-s (all threads); ratios of CPU-s rates\n",
              omp_get_max_threads());
   fmt::print("  flankcam: the batch call (answers in Morton order, as a fit asks) | single queries in the given order\n");
@@ -95,6 +101,7 @@ int main(int argc, char** argv) {
   // (n_s, n_t) of the envelope grids: 2,970, 13,200, 201,240 and 1,000,018 vertices.
   for (const auto& [ns, nt] : std::vector<std::pair<int, int>>{{27, 110}, {66, 200}, {258, 780}, {577, 1733}}) {
     if (long(ns) * nt > max_vertices) break;
+    if (long(ns) * nt < min_vertices) continue;
     const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), ns, nt, 1);
     const TriMesh mesh = transformed(g.mesh, unit_diagonal_frame(g.mesh));
     const Clock build;
@@ -105,12 +112,16 @@ int main(int argc, char** argv) {
     const auto P = [&](int v) { return K::Point_3(mesh.vertices[size_t(v)].x(), mesh.vertices[size_t(v)].y(), mesh.vertices[size_t(v)].z()); };
     for (const auto& F : mesh.faces) tris.emplace_back(P(F[0]), P(F[1]), P(F[2]));
     const Clock cgal_build;
-    Tree tree(tris.begin(), tris.end());
-    tree.build();
-    tree.accelerate_distance_queries();
+    Tree tree;
+    if (with_cgal) {
+      tree.insert(tris.begin(), tris.end());
+      tree.build();
+      tree.accelerate_distance_queries();
+    }
     const double cgal_build_s = cgal_build.wall_s();
     const int n = mesh.vertices.size() > 500'000 ? 100'000 : 200'000;
     for (double offset : {0.0, 0.01, 0.05}) {
+      if (only_offset >= 0 && offset != only_offset) continue;
       const auto queries = queries_at(mesh, offset, n, 7);
       (void)index.closest(std::vector<Eigen::Vector3d>(queries.begin(), queries.begin() + 2000));  // warm up
       const Clock ours;
@@ -124,6 +135,7 @@ int main(int argc, char** argv) {
       const auto cgal = [&](const std::vector<long>& order, std::vector<double>& d2) {
         d2.assign(queries.size(), 0);
         const Clock theirs;
+        if (!with_cgal) return std::pair<double, double>{NAN, NAN};
 #pragma omp parallel for schedule(static)
         for (long j = 0; j < long(order.size()); ++j) {
           const long i = order[size_t(j)];
@@ -141,7 +153,7 @@ int main(int argc, char** argv) {
       // Same answers: distances agree to rounding.
       int disagree = 0;
       for (size_t i = 0; i < queries.size(); ++i)
-        if (std::abs(fp[i].distance - std::sqrt(cgal_d2[i])) > 1e-12 || single_d[i] != fp[i].distance ||
+        if ((with_cgal && std::abs(fp[i].distance - std::sqrt(cgal_d2[i])) > 1e-12) || single_d[i] != fp[i].distance ||
             cgal_sorted_d2[i] != cgal_d2[i])
           ++disagree;
       fmt::print("{:>9} {:>7.2f} | {:>8.0f} ({:>8.0f}) | {:>8.0f} ({:>8.0f}) | {:>8.0f} ({:>8.0f}) | {:>8.0f} ({:>8.0f}) | {:>5.2f} "

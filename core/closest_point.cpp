@@ -97,6 +97,7 @@ struct LeafFace {
 };
 
 constexpr int kLeafFaces = 4;
+constexpr size_t kCertificateLeaves = size_t(1) << 15;  // meshes of up to 131,072 faces get local certificates
 
 // Float lower bounds on the distance from a point to each face of a leaf (lane j: face j): the
 // distance to the face's plane, and in the plane the distance beyond the farthest edge line
@@ -231,6 +232,13 @@ struct SurfaceIndex::Impl {
   double coordinate_bound = 0;              // largest |coordinate| of a vertex
   BoundingBox box;                          // of the vertices (orders batch queries)
   bool prefetching = false;                 // the tree is far bigger than a core's caches
+  // Local certificates (queries on or next to the surface): per leaf l, the leaves holding a face
+  // that shares a corner with one of l's faces, l included (near_leaf[near_begin[l] .. near_begin[l + 1]),
+  // ascending), the centre of l's corners, and `reach`: a lower bound, less 2 slack, on the distance
+  // from that centre to every face outside those leaves (+inf: none).
+  std::vector<int> near_begin, near_leaf;
+  std::vector<double> reach;                // per leaf
+  std::vector<Eigen::Vector3d> centre;      // per leaf
 
   double face_distance2(int f, const Eigen::Vector3d& p) const {
     const auto& F = mesh.faces[f];
@@ -244,7 +252,10 @@ struct SurfaceIndex::Impl {
     int slot = -1;
     TrianglePoint tp;
   };
-  Hit search(const Eigen::Vector3d& p, int hint_leaf = -1) const;
+  // `excluded`: ascending leaf indices whose faces are left out (the certificates' build); none when empty.
+  Hit search(const Eigen::Vector3d& p, int hint_leaf = -1, const int* excluded_begin = nullptr,
+             const int* excluded_end = nullptr) const;
+  void build_certificates();
   Footpoint footpoint(const Eigen::Vector3d& p, const Hit& h) const {
     if (h.slot < 0) return no_footpoint();
     const LeafFace& T = tri[size_t(h.slot)];
@@ -462,6 +473,80 @@ void SurfaceIndex::Impl::build() {
   prefetching = wide.size() * sizeof(Node4) + bounds.size() * (sizeof(LeafBound) + kLeafFaces * sizeof(LeafFace)) > (8u << 20);
 }
 
+// The local certificates of search(): near leaves from the corner-sharing faces, and each leaf's
+// reach by an exact search from its centre that leaves its near leaves out.
+void SurfaceIndex::Impl::build_certificates() {
+  const int nf = int(mesh.faces.size()), nv = int(mesh.vertices.size());
+  const int leaves = int(bounds.size());
+  // Faces around each vertex (CSR) and each face's leaf.
+  std::vector<int> vf_begin(size_t(nv) + 1, 0), vf(size_t(3) * size_t(nf)), leaf_of(size_t(nf), 0);
+  for (const auto& F : mesh.faces)
+    for (int v : F) ++vf_begin[size_t(v) + 1];
+  for (int v = 0; v < nv; ++v) vf_begin[size_t(v) + 1] += vf_begin[size_t(v)];
+  {
+    std::vector<int> fill(vf_begin.begin(), vf_begin.end() - 1);
+    for (int f = 0; f < nf; ++f)
+      for (int v : mesh.faces[size_t(f)]) vf[size_t(fill[size_t(v)]++)] = f;
+  }
+  for (int k = 0; k < int(tri.size()); ++k)
+    if (k < nf) leaf_of[size_t(tri[size_t(k)].face)] = k / kLeafFaces;
+  const auto near_of = [&](int l, std::vector<int>& out) {
+    out.clear();
+    for (int k = l * kLeafFaces; k < std::min(nf, (l + 1) * kLeafFaces); ++k)
+      for (int v : mesh.faces[size_t(tri[size_t(k)].face)])
+        for (int j = vf_begin[size_t(v)]; j < vf_begin[size_t(v) + 1]; ++j) out.push_back(leaf_of[size_t(vf[size_t(j)])]);
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  };
+  near_begin.assign(size_t(leaves) + 1, 0);
+#pragma omp parallel if (leaves > 2000)
+  {
+    std::vector<int> scratch;
+#pragma omp for schedule(static)
+    for (int l = 0; l < leaves; ++l) {
+      near_of(l, scratch);
+      near_begin[size_t(l) + 1] = int(scratch.size());
+    }
+  }
+  for (int l = 0; l < leaves; ++l) near_begin[size_t(l) + 1] += near_begin[size_t(l)];
+  near_leaf.resize(size_t(near_begin.back()));
+  reach.assign(size_t(leaves), 0);
+  centre.assign(size_t(leaves), Eigen::Vector3d::Zero());
+#pragma omp parallel if (leaves > 2000)
+  {
+    std::vector<int> scratch;
+#pragma omp for schedule(static)
+    for (int l = 0; l < leaves; ++l) {
+      near_of(l, scratch);
+      std::copy(scratch.begin(), scratch.end(), near_leaf.begin() + near_begin[size_t(l)]);
+      Eigen::Vector3d c = Eigen::Vector3d::Zero();
+      int corners = 0;
+      for (int k = l * kLeafFaces; k < std::min(nf, (l + 1) * kLeafFaces); ++k, corners += 3)
+        c += tri[size_t(k)].a + tri[size_t(k)].b + tri[size_t(k)].c;
+      centre[size_t(l)] = c / double(corners);
+    }
+  }
+#pragma omp parallel for schedule(dynamic, 256) if (leaves > 200)
+  for (int l = 0; l < leaves; ++l) {
+    const int* const b = near_leaf.data() + near_begin[size_t(l)];
+    const int* const e = near_leaf.data() + near_begin[size_t(l) + 1];
+    const Eigen::Vector3d& c = centre[size_t(l)];
+    // Start from the nearest leaf one ring further out (a tight first bound: the search then
+    // visits little more than the boxes around c).
+    int start = -1;
+    double start_d2 = std::numeric_limits<double>::infinity();
+    for (const int* m = b; m != e; ++m)
+      for (int j = near_begin[size_t(*m)]; j < near_begin[size_t(*m) + 1]; ++j) {
+        const int o = near_leaf[size_t(j)];
+        const double d2 = (centre[size_t(o)] - c).squaredNorm();
+        if (d2 < start_d2 && !std::binary_search(b, e, o)) start = o, start_d2 = d2;
+      }
+    // The nearest face outside the near leaves, exactly (the search is exact on the faces it is given).
+    const Hit h = search(c, start < 0 ? -1 : start * kLeafFaces, b, e);
+    reach[size_t(l)] = h.slot < 0 ? std::numeric_limits<double>::infinity() : (h.tp.point - c).norm() - 2 * slack;
+  }
+}
+
 // Ordered depth-first search: the nearer children first, a child is skipped when its box is
 // farther than the best face so far. Among faces at the same distance the lowest index wins, as in
 // closest_brute_force, so the answer is the same face whatever the tree's shape or the order in
@@ -473,7 +558,8 @@ void SurfaceIndex::Impl::build() {
 // ulps of |p|_1 + |m| (R's entries are below 1 + 1e-7), so |local| - e is lowered by kFloatError
 // (|p|_1 + |m|) (the |m| part is in e since build) and the squared bound compared with a prune
 // radius raised by kFloatError: a box is never pruned when the double bound would keep it.
-SurfaceIndex::Impl::Hit SurfaceIndex::Impl::search(const Eigen::Vector3d& p, int hint_leaf) const {
+SurfaceIndex::Impl::Hit SurfaceIndex::Impl::search(const Eigen::Vector3d& p, int hint_leaf, const int* excluded_begin,
+                                                   const int* excluded_end) const {
   struct Entry {
     int link;
     float d2;
@@ -501,12 +587,25 @@ SurfaceIndex::Impl::Hit SurfaceIndex::Impl::search(const Eigen::Vector3d& p, int
   const auto visit_leaf = [&](int first, int count) {
     alignas(16) float lb[4];
     leaf_bound4(bounds[size_t(first / kLeafFaces)], x, y, z, leaf_margin, lb);
-    int lane[4] = {0, 1, 2, 3};
-    for (int i = 1; i < count; ++i)
-      for (int j = i; j > 0 && lb[lane[j]] < lb[lane[j - 1]]; --j) std::swap(lane[j], lane[j - 1]);
-    for (int i = 0; i < count; ++i) {
-      if (lb[lane[i]] * float(1 - 4 * kFloatError) > prune2) break;
-      const int k = first + lane[i];
+    // The lanes still in question (bit j: face j's bound is within the prune radius), nearest
+    // bound first; most leaves visited near the answer have none or one.
+    const int lanes = (1 << count) - 1;
+    const auto open = [&] {
+#ifdef __SSE2__
+      return _mm_movemask_ps(_mm_cmple_ps(_mm_mul_ps(_mm_load_ps(lb), _mm_set1_ps(float(1 - 4 * kFloatError))),
+                                          _mm_set1_ps(prune2))) & lanes;
+#else
+      int mask = 0;
+      for (int j = 0; j < count; ++j) mask |= (lb[j] * float(1 - 4 * kFloatError) <= prune2) << j;
+      return mask;
+#endif
+    };
+    for (int mask = open(); mask != 0; mask = open()) {
+      int j = __builtin_ctz(unsigned(mask));
+      for (int i = j + 1; i < count; ++i)
+        if ((mask >> i & 1) && lb[i] < lb[j]) j = i;
+      lb[j] = INFINITY;  // tested
+      const int k = first + j;
       const LeafFace& T = tri[size_t(k)];
       const TrianglePoint tp = closest_on_triangle(p, T.a, T.b, T.c);
       if (closer((tp.point - p).squaredNorm(), T.face, best2, face)) {
@@ -528,10 +627,43 @@ SurfaceIndex::Impl::Hit SurfaceIndex::Impl::search(const Eigen::Vector3d& p, int
   };
   const bool big = prefetching;
   int hint_link = 0;  // 0 is the root, never a leaf link
+  const int nf = int(mesh.faces.size());
+  const auto leaf_count = [&](int leaf) { return std::min(kLeafFaces, nf - leaf * kLeafFaces); };
   if (hint_leaf >= 0) {
-    const int count = std::min(kLeafFaces, int(mesh.faces.size()) - hint_leaf);
+    const int count = leaf_count(hint_leaf / kLeafFaces);
     hint_link = ~(hint_leaf * 8 + count);
     visit_leaf(hint_leaf, count);
+    // Local certificate: every face outside the leaves near leaf l is at least reach[l] - |p - centre[l]|
+    // from p (triangle inequality). When the best face so far is nearer than that by 2 slack (which
+    // covers the rounding of both distances), visiting the near leaves finds the answer, and nothing
+    // else can equal it, so the tie rule holds too. Tried from the hint's leaf, then once from the
+    // leaf of the best face among its near leaves; on or next to the surface one of them usually
+    // holds. Otherwise the tree search below runs with the best face found so far, the near leaves
+    // of the hint left out (they have been visited).
+    if (!near_begin.empty()) {
+      const auto room = [&](int l) {
+        return reach[size_t(l)] - (p - centre[size_t(l)]).norm() - 2 * slack;
+      };
+      const int l0 = hint_leaf / kLeafFaces;
+      const double room0 = room(l0);
+      if (face >= 0 && std::sqrt(best2) < reach[size_t(l0)]) {  // p is near l0: its near leaves are worth a visit
+        const int* const b0 = near_leaf.data() + near_begin[size_t(l0)];
+        const int* const e0 = near_leaf.data() + near_begin[size_t(l0) + 1];
+        for (const int* l = b0; l != e0; ++l)
+          if (*l != l0) visit_leaf(*l * kLeafFaces, leaf_count(*l));
+        if (std::sqrt(best2) < room0) return hit;
+        const int l1 = hit.slot / kLeafFaces;
+        if (l1 != l0) {
+          const double room1 = room(l1);
+          if (std::sqrt(best2) < room1) {
+            for (const int* l = near_leaf.data() + near_begin[size_t(l1)]; l != near_leaf.data() + near_begin[size_t(l1) + 1]; ++l)
+              if (!std::binary_search(b0, e0, *l)) visit_leaf(*l * kLeafFaces, leaf_count(*l));
+            if (std::sqrt(best2) < room1) return hit;  // (best2 only falls)
+          }
+        }
+        excluded_begin = b0, excluded_end = e0;
+      }
+    }
   }
   stack[top++] = {0, 0.0F};
   while (top > 0) {
@@ -540,7 +672,9 @@ SurfaceIndex::Impl::Hit SurfaceIndex::Impl::search(const Eigen::Vector3d& p, int
     int link = en.link;
     for (;;) {
       if (link < 0) {
-        if (link != hint_link) visit_leaf((~link) >> 3, (~link) & 7);
+        if (link != hint_link &&
+            (excluded_begin == excluded_end || !std::binary_search(excluded_begin, excluded_end, ((~link) >> 3) / kLeafFaces)))
+          visit_leaf((~link) >> 3, (~link) & 7);
         break;
       }
       const Node4& w = W[link];
@@ -587,7 +721,12 @@ SurfaceIndex::SurfaceIndex(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
   }
   s.cover = cover;
   s.box = bounding_box(s.mesh.vertices);
-  if (!s.mesh.faces.empty()) s.build();
+  if (!s.mesh.faces.empty()) {
+    s.build();
+    // On big meshes a batch's neighbouring queries are rarely in one leaf's neighbourhood, and the
+    // certificates' build (one search per leaf) costs more than they save (measured at 200k vertices).
+    if (s.bounds.size() <= kCertificateLeaves) s.build_certificates();
+  }
 }
 
 SurfaceIndex::~SurfaceIndex() = default;
@@ -656,8 +795,8 @@ std::vector<Footpoint> SurfaceIndex::closest(const std::vector<Eigen::Vector3d>&
 #pragma omp for schedule(static)
     for (long j = 0; j < n; ++j) {
       // The point and the answer of a query a few ahead are fetched while this one is searched.
-      if (j + 8 < n) {
-        const long ahead = index(j + 8);
+      if (j + 32 < n) {
+        const long ahead = index(j + 32);
         __builtin_prefetch(&points[size_t(ahead)]);
         __builtin_prefetch(&out[size_t(ahead)], 1);
         __builtin_prefetch(reinterpret_cast<const char*>(&out[size_t(ahead)]) + sizeof(Footpoint) - 1, 1);

@@ -4,6 +4,10 @@
 // bounds before the exact double test; searched nearer child first and pruned by conservative
 // bounds. The cost per query grows like log n at any distance from the surface; the answer equals
 // brute force, face included (ties go to the lower face index), whatever the thread count.
+// Meshes of up to 131k faces also keep a local certificate per leaf (its corner-sharing
+// neighbourhood and a lower bound on the distance to every face outside it): a batch query on or
+// next to the surface, started from the previous answer's leaf, is then settled by a handful of
+// leaves without the descent from the root.
 #pragma once
 #include <Eigen/Core>
 #include <array>

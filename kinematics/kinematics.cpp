@@ -10,7 +10,23 @@ namespace {
 constexpr double kDeg = M_PI / 180;
 constexpr double kFree = 1e-9;  // |component normal to the axis| below this: the angle is free
 
-Eigen::Matrix3d rot(const Eigen::Vector3d& axis, double angle_rad) { return Eigen::AngleAxisd(angle_rad, axis).toRotationMatrix(); }
+// Eigen::AngleAxisd(angle, axis).toRotationMatrix() given c = cos(angle), s = sin(angle): the same
+// operations in the same order, so the same bits (the path solver has the cosines and sines).
+Eigen::Matrix3d rot(const Eigen::Vector3d& axis, double c, double s) {
+  Eigen::Matrix3d res;
+  const Eigen::Vector3d sin_axis = s * axis, cos1_axis = (1 - c) * axis;
+  double tmp = cos1_axis.x() * axis.y();
+  res(0, 1) = tmp - sin_axis.z();
+  res(1, 0) = tmp + sin_axis.z();
+  tmp = cos1_axis.x() * axis.z();
+  res(0, 2) = tmp + sin_axis.y();
+  res(2, 0) = tmp - sin_axis.y();
+  tmp = cos1_axis.y() * axis.z();
+  res(1, 2) = tmp - sin_axis.x();
+  res(2, 1) = tmp + sin_axis.x();
+  res.diagonal() = (cos1_axis.cwiseProduct(axis)).array() + c;
+  return res;
+}
 
 // The affine map of the table chain (part -> machine) or the head chain (tool -> ram), outer axis
 // first: x -> c0 + R0 (c1 + R1 (x - c1) - c0). Tables rotate about points in part coordinates;
@@ -27,18 +43,25 @@ struct Chains {
 };
 // Both chains with one rotation matrix per axis. The inner (carried) axis is applied first, so
 // that the outer axis acts on the result.
-Chains chains(const Machine& m, const std::array<double, 2>& deg, double tool_length) {
+// `cos_deg`, `sin_deg`: the cosines and sines of the angles in degrees, as std::cos(deg * kDeg).
+Chains chains(const Machine& m, const std::array<double, 2>& cos_deg, const std::array<double, 2>& sin_deg,
+              double tool_length) {
   Chains c;
   for (int k = 1; k >= 0; --k) {
     const RotaryAxis& a = m.rotary[size_t(k)];
     const bool table = a.carries == Carrier::Table;
     const Eigen::Vector3d centre = table ? a.pivot : a.pivot + (m.gauge_length_mm + tool_length) * m.spindle_direction;
-    const Eigen::Matrix3d R = rot(a.direction, deg[size_t(k)] * kDeg);
+    const Eigen::Matrix3d R = rot(a.direction, cos_deg[size_t(k)], sin_deg[size_t(k)]);
     Chain& ch = table ? c.table : c.head;
     ch.R = R * ch.R;
     ch.t = R * (ch.t - centre) + centre;
   }
   return c;
+}
+Chains chains(const Machine& m, const std::array<double, 2>& deg, double tool_length) {
+  std::array<double, 2> c{}, s{};
+  for (size_t k = 0; k < 2; ++k) c[k] = std::cos(deg[k] * kDeg), s[k] = std::sin(deg[k] * kDeg);
+  return chains(m, c, s, tool_length);
 }
 
 // Angle that turns p into q about the unit axis w (components along w ignored); nullopt-like flag
@@ -51,6 +74,7 @@ double angle_about(const Eigen::Vector3d& w, const Eigen::Vector3d& p, const Eig
 }
 
 double wrap180(double deg) {
+  if (deg > -180 && deg <= 180) return deg + 0.0;  // what the remainder below gives, without it
   double x = std::remainder(deg, 360.0);
   if (x <= -180) x += 360;
   return x + 0.0;
@@ -158,6 +182,12 @@ PreparedForward prepare_forward(const Machine& m, double tool_length) {
 Eigen::Vector3d linear_joints(const Machine& m, const ToolPose& pose, const std::array<double, 2>& deg, double tool_length) {
   // Machine position of the tip: T(tip_part); the tip relative to the controlled point: H(0).
   const Chains c = chains(m, deg, tool_length);
+  return c.table.apply(pose.tip) - c.head.t;
+}
+
+Eigen::Vector3d linear_joints(const Machine& m, const ToolPose& pose, const std::array<double, 2>& cos_deg,
+                              const std::array<double, 2>& sin_deg, double tool_length) {
+  const Chains c = chains(m, cos_deg, sin_deg, tool_length);
   return c.table.apply(pose.tip) - c.head.t;
 }
 

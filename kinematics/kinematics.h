@@ -48,6 +48,10 @@ struct RotarySolutionPair {
 // The linear joints for a pose once the rotary angles are chosen.
 [[nodiscard]] Eigen::Vector3d linear_joints(const Machine& m, const ToolPose& pose, const std::array<double, 2>& rotary_deg,
                                             double tool_length_mm);
+// The same given cos_deg[k] = std::cos(rotary_deg[k] * pi / 180) and sin_deg[k] likewise (bit for bit
+// the same result; the path solver reuses the cosines and sines).
+[[nodiscard]] Eigen::Vector3d linear_joints(const Machine& m, const ToolPose& pose, const std::array<double, 2>& cos_deg,
+                                            const std::array<double, 2>& sin_deg, double tool_length_mm);
 
 // Part (work) frame -> machine frame at these rotary angles: the table chain (identity for head
 // axes). Heights in the machine frame are what a safe Z must clear.

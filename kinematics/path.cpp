@@ -26,6 +26,16 @@ namespace {
 constexpr double kInf = std::numeric_limits<double>::infinity();
 constexpr double kDeg = M_PI / 180;
 
+// Cosines and sines of a pose's rotary angles (the linearisation checks step from them).
+struct Trig {
+  std::array<double, 2> c{1, 1}, s{0, 0};
+};
+Trig trig_of(const std::array<double, 2>& deg) {
+  Trig t;
+  for (size_t k = 0; k < 2; ++k) t.c[k] = std::cos(deg[k] * kDeg), t.s[k] = std::sin(deg[k] * kDeg);
+  return t;
+}
+
 // A candidate joint solution at one pose (its index is the IK branch): angles (NaN = free).
 struct Candidate {
   std::array<double, 2> deg;
@@ -47,13 +57,22 @@ struct Rejection {
   }
 };
 
+// std::round (half away from zero, sign kept) without the library call: the Viterbi pass, which
+// runs on one thread, rounds eight times per pose.
+inline double round_half_away(double x) {
+  if (!(std::abs(x) < 0x1p52)) return std::round(x);  // large, infinite or NaN
+  double t = double(static_cast<long long>(x));         // towards zero, exact
+  if (std::abs(x - t) >= 0.5) t += x < 0 ? -1.0 : 1.0;  // x - t is exact
+  return std::copysign(t, x);
+}
+
 // The value of angle `k` for candidate `c` nearest to `prev` that the axis allows (NaN if none).
-double resolve(const RotaryAxis& a, double deg, double prev) {
+inline double resolve(const RotaryAxis& a, double deg, double prev) {
   if (std::isnan(deg)) deg = prev;  // free: hold
-  if (a.continuous) return deg + 360.0 * std::round((prev - deg) / 360.0);
+  if (a.continuous) return deg + 360.0 * round_half_away((prev - deg) / 360.0);
   // Usually the nearest turn is within the limits and nearer than any other by a margin: the
   // search below would pick it.
-  const double turn = std::round((prev - deg) / 360.0);
+  const double turn = round_half_away((prev - deg) / 360.0);
   if (std::abs(turn) <= 3) {
     const double v = deg + 360.0 * turn;
     if (v >= a.min_deg - 1e-9 && v <= a.max_deg + 1e-9 && std::abs(v - prev) < 179) return v;
@@ -97,15 +116,6 @@ bool near_singular(const Machine& m, const Eigen::Vector3d& axis, double singula
   return singularity_cosine(m, axis) > std::cos(singular_deg * kDeg);
 }
 
-// Cosines and sines of a pose's rotary angles (the linearisation checks step from them).
-struct Trig {
-  std::array<double, 2> c{1, 1}, s{0, 0};
-};
-Trig trig_of(const std::array<double, 2>& deg) {
-  Trig t;
-  for (size_t k = 0; k < 2; ++k) t.c[k] = std::cos(deg[k] * kDeg), t.s[k] = std::sin(deg[k] * kDeg);
-  return t;
-}
 
 }  // namespace
 
@@ -154,6 +164,9 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   // Candidates per pose within the rotary limits (any turn), independent of the predecessor.
   std::vector<Two<Candidate>> cand(static_cast<size_t>(n));
   std::vector<Two<Rejection>> cand_linear(static_cast<size_t>(n));  // per candidate when linear_ok == 0
+  // Cosines and sines of each candidate's angles when linear_ok >= 0 (apart: the serial Viterbi
+  // pass below streams through `cand`, which stays small).
+  std::vector<std::array<Trig, 2>> cand_trig(static_cast<size_t>(n));
   std::vector<char> singular(static_cast<size_t>(n), 0);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
@@ -163,7 +176,8 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
       for (int k = 0; k < 2; ++k)
         if (s.free[k]) c.deg[k] = NAN, singular[i] = 1;
       if (!s.free[0] && !s.free[1]) {
-        c.linear = linear_joints(m, poses[i], s.deg, o.tool_length_mm);
+        const Trig& tr = cand_trig[size_t(i)][cand[i].size()] = trig_of(s.deg);
+        c.linear = linear_joints(m, poses[i], tr.c, tr.s, o.tool_length_mm);
         cand_linear[i][cand[i].size()] = linear_limits(m, c.linear);
         c.linear_ok = cand_linear[i][cand[i].size()].axis < 0 ? 1 : 0;
       }
@@ -260,16 +274,22 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     }
   }
   std::vector<Joints> q(static_cast<size_t>(n));
-  for (int i = 0; i < n; ++i) q[i].rotary = st[i][size_t(pick[i])].deg;
+  std::vector<char> free_angle(static_cast<size_t>(n));  // bit k: angle k is free at the chosen candidate
+#pragma omp parallel for schedule(static)
+  for (int i = 0; i < n; ++i) {
+    q[i].rotary = st[i][size_t(pick[i])].deg;
+    const Candidate& c = cand[i][size_t(pick[i])];
+    free_angle[size_t(i)] = char((std::isnan(c.deg[0]) ? 1 : 0) | (std::isnan(c.deg[1]) ? 2 : 0));
+  }
   // Free angles: interpolate across each singular run between its defined neighbours.
   for (int k = 0; k < 2; ++k) {
     for (int i = 0; i < n;) {
-      if (!std::isnan(cand[i][size_t(pick[i])].deg[k])) {
+      if (!(free_angle[size_t(i)] >> k & 1)) {
         ++i;
         continue;
       }
       int j = i;
-      while (j < n && std::isnan(cand[j][size_t(pick[j])].deg[k])) ++j;
+      while (j < n && (free_angle[size_t(j)] >> k & 1)) ++j;
       const bool has_before = i > 0, has_after = j < n;
       for (int r = i; r < j; ++r) {
         double v = q[r].rotary[k];
@@ -289,16 +309,21 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   for (int i = 0; i < n; ++i) {
     // The candidate's linear joints when the chosen angles are its own, bit for bit (no turn added).
     const Candidate& c = cand[i][size_t(pick[i])];
-    q[i].linear = c.linear_ok >= 0 && std::memcmp(c.deg.data(), q[i].rotary.data(), sizeof c.deg) == 0
-                      ? c.linear
-                      : linear_joints(m, poses[i], q[i].rotary, o.tool_length_mm);
-    trig[i] = trig_of(q[i].rotary);
+    if (c.linear_ok >= 0 && std::memcmp(c.deg.data(), q[i].rotary.data(), sizeof c.deg) == 0) {
+      q[i].linear = c.linear;
+      trig[i] = cand_trig[size_t(i)][size_t(pick[i])];
+    } else {
+      trig[i] = trig_of(q[i].rotary);
+      q[i].linear = linear_joints(m, poses[i], trig[i].c, trig[i].s, o.tool_length_mm);
+    }
   }
-  for (int i = 0; i < n; ++i) {
-    if (i > 0 && cand[i].size() > 1 && cand[i - 1].size() > 1 && !singular[i] &&
-        !singular[i - 1] && pick[i] != pick[i - 1])
-      ++out.branch_changes;
+  int branch_changes = 0;
+#pragma omp parallel for schedule(static) reduction(+ : branch_changes)
+  for (int i = 1; i < n; ++i) {
+    if (cand[i].size() > 1 && cand[i - 1].size() > 1 && !singular[i] && !singular[i - 1] && pick[i] != pick[i - 1])
+      ++branch_changes;
   }
+  out.branch_changes = branch_changes;
 
   // Linearisation by recursive bisection of each block.
   const PreparedForward fk = prepare_forward(m, o.tool_length_mm);

@@ -270,3 +270,55 @@ TEST_CASE("the index of a 40k-face mesh is the same on 1 and 2 threads: normals,
   CHECK(differ == 0);
   check_matches_brute_force(one, std::vector<Eigen::Vector3d>(queries.begin(), queries.begin() + 100));
 }
+
+TEST_CASE("the batch call equals brute force where faces that share no corner are closer than an edge") {
+  // Two wavy sheets 0.3 apart with edges of 1 (the second shifted by 0.37, 0.21): the faces nearest
+  // a point on one sheet include faces of the other, which share no corner with it. The batch call's
+  // local certificates (a leaf's corner-sharing neighbourhood and its reach) must see them.
+  TriMesh mesh;
+  const int nx = 40, ny = 30;
+  for (int sheet = 0; sheet < 2; ++sheet) {
+    const int base = int(mesh.vertices.size());
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const double x = i + 0.37 * sheet, y = j + 0.21 * sheet;
+        mesh.vertices.emplace_back(x, y, 0.3 * sheet + 0.05 * std::sin(0.7 * x) * std::cos(0.4 * y));
+      }
+    for (int j = 0; j + 1 < ny; ++j)
+      for (int i = 0; i + 1 < nx; ++i) {
+        const int v = base + j * nx + i;
+        mesh.faces.push_back({v, v + 1, v + nx + 1});
+        mesh.faces.push_back({v, v + nx + 1, v + nx});
+      }
+  }
+  const SurfaceIndex index(mesh);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Eigen::Vector3d> queries;
+  for (int k = 0; k < 6000; ++k) {
+    // On a face (either sheet), or between the sheets at any height.
+    const auto& F = mesh.faces[size_t(std::uniform_int_distribution<int>(0, int(mesh.faces.size()) - 1)(rng))];
+    double b1 = u(rng), b2 = u(rng);
+    if (b1 + b2 > 1) b1 = 1 - b1, b2 = 1 - b2;
+    const Eigen::Vector3d &a = mesh.vertices[size_t(F[0])], &b = mesh.vertices[size_t(F[1])], &c = mesh.vertices[size_t(F[2])];
+    Eigen::Vector3d q = a + b1 * (b - a) + b2 * (c - a);
+    if (k % 3 == 2) q.z() = 0.35 * u(rng) - 0.02;
+    queries.push_back(q);
+  }
+  for (size_t v = 0; v < mesh.vertices.size(); v += 5) queries.push_back(mesh.vertices[v]);
+  const auto fast = index.closest(queries);
+  int differ = 0, upper = 0, lower = 0;
+  const int faces_per_sheet = int(mesh.faces.size()) / 2;
+  for (size_t i = 0; i < queries.size(); ++i) {
+    const Footpoint slow = index.closest_brute_force(queries[i]);
+    if (fast[i].face != slow.face || fast[i].distance != slow.distance || fast[i].point != slow.point ||
+        fast[i].normal != slow.normal || fast[i].on_boundary != slow.on_boundary)
+      ++differ;
+    if (i < 6000 && i % 3 == 2) ++(slow.face < faces_per_sheet ? lower : upper);
+  }
+  CHECK(differ == 0);
+  // The queries between the sheets are answered by both sheets, many by a face that shares no
+  // corner with the face the query was made on.
+  CHECK(upper > 300);
+  CHECK(lower > 300);
+}
