@@ -6,8 +6,6 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 #include <numeric>
 #include <optional>
 
@@ -660,7 +658,6 @@ CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const Che
     const double R = cs.offset + (cs.j >= 0 ? tool.d(cs.s) : 0.0);
     const double v = R - dist[k].distance;
     if (v > out.intrusion[size_t(cs.i)]) {
-      if (std::getenv("FC_DBG2") && cs.i % 40 == 0 && v > 0) std::fprintf(stderr, "DBG2 row %d s %.3f j %d body %d reach %.4f v %.5f q %.4f %.4f %.4f\n", cs.i, cs.s, cs.j, int(cs.body), cs.reach, v, dist[k].q.x(), dist[k].q.y(), dist[k].q.z());
       out.intrusion[size_t(cs.i)] = v;
       out.body[size_t(cs.i)] = cs.body;
       out.at[size_t(cs.i)] = dist[k].q;

@@ -4,8 +4,6 @@
 
 #include <chrono>
 #include <cmath>
-#include <cstdio>
-#include <cstdlib>
 
 #include "core/errors.h"
 
@@ -153,7 +151,6 @@ std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& 
   for (int k = 1; k <= 12; ++k) {
     const double c = 0.05 * k;
     ToolCut cut = tip_at_a ? cut_tool(r, plain.fit.tool, c, 1) : cut_tool(r, plain.fit.tool, 0, 1 - c);
-    if (std::getenv("FC_DBG")) std::fprintf(stderr, "DBG cut %.2f: radius error %.2e constraint %.2e\n", c, cut.radius_error, check_constraints(cut.tool, cut.rails.length, o.fit.constraints).violation);
     if (cut.radius_error > 0.1 * o.tolerance) continue;
     if (check_constraints(cut.tool, cut.rails.length, o.fit.constraints).violation > 0.01 * o.tolerance) continue;
     const CheckProfile p = check_profile(cut.rails, cut.tool, o.fit.check, rows, o.fit.samples_s);
@@ -161,7 +158,6 @@ std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& 
     for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(p.intrusion[size_t(i)] > 0);
     const auto [t0, t1] = longest_run(ok);
     const double score = (t1 - t0) * (1 - c);
-    if (std::getenv("FC_DBG")) std::fprintf(stderr, "DBG cut %.2f: clear %.3f-%.3f\n", c, t0, t1);
     if (score > best_score) best_score = score, best = std::move(cut);
     if (t0 == 0.0 && t1 == 1.0) break;  // clear everywhere: a longer cut only loses
   }
@@ -196,14 +192,12 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   PatchFit best = machine_and_trim(surface, plain, o);
   if (clear) return tip_at_a(std::move(best));
   const auto good = [](const PatchFit& f) { return !f.check_refused && !(f.check_intrusion > 0) && !f.gouges; };
-  const auto dbg = [&](const char* w, const PatchFit& f) { if (std::getenv("FC_DBG")) std::fprintf(stderr, "DBG %s: cov %.3f t %.3f-%.3f intr %.5f refused %d gouges %d L %.4f eps %.2e\n", w, f.coverage, f.t_from, f.t_to, f.check_intrusion, int(f.check_refused), int(f.gouges), f.fit.rails.length, f.fit.eps_opt.max); };
-  dbg("plain-trimmed", best);
   // The tool shortened at its tip (a hub under the flank's lower edge): clear, it is compared with the
   // trimmed plain motion by coverage (and replaces it when that is not clear).
   if (o.on_stage) o.on_stage("shortening the tool at its tip to keep out of the part");
   bool shortened = false;
   if (std::optional<PatchFit> cut = cut_at_tip(surface, plain, o); cut && good(*cut))
-    if (dbg("cut", *cut), !good(best) || cut->coverage > best.coverage) best = std::move(*cut), shortened = true;
+    if (!good(best) || cut->coverage > best.coverage) best = std::move(*cut), shortened = true;
   // The tip was what entered the part (shortening it gained most), or no refit is wanted: a penalised
   // refit, which tilts the whole axis, is not tried (on the HECC impeller it never beat the shortened
   // tool, at ~10 s a patch).
@@ -218,7 +212,6 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   refit.fit.eps_ini = plain.fit.eps_ini;
   refit.fit.iterations += plain.fit.iterations;
   refit = machine_and_trim(surface, std::move(refit), o);
-  dbg("refit", refit);
   // A refit that keeps clear by fitting Φ much worse is no way out.
   const bool a = good(best), b = good(refit) && refit.fit.eps_opt.max <= std::max(o.tolerance, 2 * plain.fit.eps_opt.max);
   if (a != b) return tip_at_a(b ? std::move(refit) : std::move(best));
