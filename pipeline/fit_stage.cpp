@@ -232,6 +232,30 @@ void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, con
   }
 }
 
+// tool: {shared: true}: one custom tool for every patch, fitted jointly to all of them (eq. 12
+// summed over the patches, common length the mean of theirs), starting from their separate fits;
+// each patch is then machined and trimmed again with its own options.
+void share_tool(const Job& job, const std::vector<const SurfaceIndex*>& targets, const std::vector<PatchOptions>& options,
+                const FitOptions& o, FittedJob& out, const Progress& progress) {
+  std::vector<FitResult> fits;
+  double length = 0;
+  for (const FittedPatch& fp : out.patches) {
+    fits.push_back(fp.fit.fit);
+    length += fp.fit.fit.rails.length / double(out.patches.size());
+  }
+  length = std::min(length, o.constraints.max_length);
+  progress(fmt::format("shared tool: one tool of length {:.3f} mm for {} patches", out.frame.length_to_mm(length),
+                       out.patches.size()));
+  fits = fit_shared_tool(targets, std::move(fits), length, o);
+  for (size_t k = 0; k < fits.size(); ++k) {
+    FittedPatch& fp = out.patches[k];
+    fp.fit.fit = std::move(fits[k]);
+    fp.fit.tip_shortened = 0;
+    fp.fit = machine_and_trim(*targets[k], std::move(fp.fit), options[k]);
+    report_fit(job, out, fp, progress);
+  }
+}
+
 // `patches: auto`: detect_patches over the whole surface with the job's fit options; the detected
 // patches become init: lines jobs (all of them before any pointer is taken) and keep their fits.
 void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit, FittedJob& out, const Progress& progress) {
@@ -389,7 +413,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
       o.check.clearance = out.frame.length_to_unit(job.clearance_mm);
       o.check.body = body_samples(job.holder, out.frame);
       o.check.ball_tip = job.tool.end.kind == EndKind::Ball;
-      // Detected patches are turned tip down afterwards (detect_job): the holder goes up.
+      // Detected patches: the tie-break of the holder end (detect_job orients them by the part).
       if (job.cover) o.check.up = setup_rotation(job.post).transpose() * Eigen::Vector3d::UnitZ();
     }
     return o;
@@ -453,27 +477,8 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     targets.push_back(target);
     patch_options.push_back(o);
   }
-  // tool: {shared: true}: one custom tool for every patch, fitted jointly to all of them (eq. 12
-  // summed over the patches), starting from their separate fits.
-  if (job.tool.shared && !catalogue && out.patches.size() > 1) {
-    std::vector<FitResult> fits;
-    double length = 0;
-    for (const FittedPatch& fp : out.patches) {
-      fits.push_back(fp.fit.fit);
-      length += fp.fit.fit.rails.length / double(out.patches.size());
-    }
-    FitOptions o = fit_options();
-    length = std::min(length, o.constraints.max_length);
-    progress(fmt::format("shared tool: one tool of length {:.3f} mm for {} patches", out.frame.length_to_mm(length),
-                         out.patches.size()));
-    fits = fit_shared_tool(targets, std::move(fits), length, o);
-    for (size_t k = 0; k < fits.size(); ++k) {
-      FittedPatch& fp = out.patches[k];
-      fp.fit.fit = std::move(fits[k]);
-      fp.fit = machine_and_trim(*targets[k], std::move(fp.fit), patch_options[k]);
-      report_fit(job, out, fp, progress);
-    }
-  }
+  if (job.tool.shared && !catalogue && out.patches.size() > 1)
+    share_tool(job, targets, patch_options, fit_options(), out, progress);
   // passes: every pass but the last with the last pass's tool held, its motion fitted to Φ offset by
   // the pass's allowance (started from the last pass's motion).
   for (size_t k = 0; k + 1 < job.passes_mm.size(); ++k)
