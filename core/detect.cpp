@@ -339,8 +339,9 @@ Seed refine_seed(const SurfaceIndex& surface, Seed seed, const CoverOptions& o) 
     n = n.norm() > 1e-9 ? Eigen::Vector3d(n.normalized()) : Eigen::Vector3d(e.unitOrthogonal());
     return std::make_pair(n, Eigen::Vector3d(e.cross(n)));
   };
-  const auto [na, ta] = frame(fa);
-  const auto [nb, tb] = frame(fb);
+  // Plain variables, not structured bindings: C++17 lambdas cannot capture bindings (clang rejects).
+  const std::pair<Eigen::Vector3d, Eigen::Vector3d> frame_a = frame(fa), frame_b = frame(fb);
+  const Eigen::Vector3d na = frame_a.first, ta = frame_a.second, nb = frame_b.first, tb = frame_b.second;
   using X = Eigen::Vector4d;  // normal offset at 20%, at 80%, across at 20%, at 80%
   const auto line_of = [&](const X& x) {
     const Eigen::Vector3d pa = qa + x[0] * na + x[2] * ta, pb = qb + x[1] * nb + x[3] * tb;
