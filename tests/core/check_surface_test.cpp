@@ -87,6 +87,19 @@ struct Setup {
     for (int k = 0; k <= 40; ++k) b.emplace_back(fr.length_to_unit(k), fr.length_to_unit(k <= 10 ? 3.0 : 10.0));
     return b;
   }
+  // The patch of the upright lines (tip at z = 0) and its options: coverage within 0.01 mm.
+  PatchSpec upright() const {
+    PatchSpec spec;
+    spec.name = "p";
+    for (double y : {5.0, 20.0, 35.0, 50.0}) spec.lines.push_back({fr.to_unit({5, y, 0}), fr.to_unit({5, y, 20})});
+    return spec;
+  }
+  PatchOptions patch_options() const {
+    PatchOptions po;
+    po.fit = o;
+    po.tolerance = fr.length_to_unit(0.01);
+    return po;
+  }
   // How far the axis leans away from the wall (+x) at the holder end, mm: x of b minus x of a.
   double lean_mm(const Rails& r, double t) const {
     return fr.length_to_mm((r.b.point(t) - r.a.point(t)).x());
@@ -130,14 +143,10 @@ TEST_CASE("a post in the cutter's way: the motion is kept clear of it or trimmed
   Setup s;
   // A post at y >= 52 mm standing where the cutter (Ø10 about x = 5) would end its motion (y = 55).
   const SurfaceIndex post(to_unit(box({1, 52, -10}, {30, 80, 100}, 4), s.fr));
-  PatchOptions po;
-  po.fit = s.o;
+  PatchOptions po = s.patch_options();
   po.fit.check.part = &post;
   po.fit.check.tolerance = s.fr.length_to_unit(0.005);
-  po.tolerance = s.fr.length_to_unit(0.01);
-  PatchSpec spec;
-  spec.name = "p";
-  for (double y : {5.0, 20.0, 35.0, 50.0}) spec.lines.push_back({s.fr.to_unit({5, y, 0}), s.fr.to_unit({5, y, 20})});
+  const PatchSpec spec = s.upright();
   const PatchFit f = fit_patch(s.phi, spec, po);
   // Kept clear: the cutter's worst intrusion is within the tolerance, and the last position's tool
   // ends before the post.
@@ -209,12 +218,8 @@ TriMesh sloping_hub() {
 TEST_CASE("a tool whose end would cut the hub under the flank is ground shorter at its tip") {
   Setup s;
   const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
-  PatchOptions po;
-  po.fit = s.o;
-  po.tolerance = s.fr.length_to_unit(0.01);
-  PatchSpec spec;
-  spec.name = "p";
-  for (double y : {5.0, 20.0, 35.0, 50.0}) spec.lines.push_back({s.fr.to_unit({5, y, 0}), s.fr.to_unit({5, y, 20})});
+  PatchOptions po = s.patch_options();
+  const PatchSpec spec = s.upright();
   const PatchFit free = fit_patch(s.phi, spec, po);
   po.fit.check.part = &hub;
   po.fit.check.tolerance = s.fr.length_to_unit(0.005);
@@ -300,17 +305,13 @@ TEST_CASE("cut_tool keeps the swept tool: rails and radii of the part that stays
 TEST_CASE("a ball end is checked as its ball: shortened less than a flat end over the same hub") {
   Setup s;
   const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
-  PatchOptions po;
-  po.fit = s.o;
-  po.tolerance = s.fr.length_to_unit(0.01);
+  PatchOptions po = s.patch_options();
   po.fit.check.part = &hub;
   po.fit.check.tolerance = s.fr.length_to_unit(0.005);
   po.fit.check.body = s.body();
   po.fit.check.ball_tip = true;
   po.machined.end = ToolEnd{EndKind::Ball, 0, s.fr.length_to_mm(1.0)};
-  PatchSpec spec;
-  spec.name = "p";
-  for (double y : {5.0, 20.0, 35.0, 50.0}) spec.lines.push_back({s.fr.to_unit({5, y, 0}), s.fr.to_unit({5, y, 20})});
+  const PatchSpec spec = s.upright();
   const PatchFit f = fit_patch(s.phi, spec, po);
   // The Ø10 ball's centre must stay 5 mm from the hub's plane z = 0.3 x; for the axis at x = 5: (z_tip + 5 - 1.5) / 1.044 >= 5, z_tip >= 1.72 mm (a flat end: 3 mm).
   double tip_z = INFINITY;
