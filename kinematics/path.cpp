@@ -455,7 +455,19 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
 }
 
 void require_reachable(const JointPath& path, const std::vector<ToolPose>& poses, const std::string& patch) {
-  if (path.reachable) return;
+  if (path.reachable) {
+    // A joint that is not a number must never reach a program (seen once on the HECC impeller, cause
+    // not yet traced): the run stops here, naming the pose, instead of posting it.
+    for (size_t j = 0; j < path.joints.size(); ++j) {
+      const Joints& q = path.joints[j];
+      if (q.linear.allFinite() && std::isfinite(q.rotary[0]) && std::isfinite(q.rotary[1])) continue;
+      const ToolPose& at = path.poses.size() == path.joints.size() ? path.poses[j] : poses.at(std::min(j, poses.size() - 1));
+      throw MachineError(fmt::format("patch '{}': block {} (tip {:.3f}, {:.3f}, {:.3f} mm): the kinematics gave a joint "
+                                     "value that is not a finite number; nothing is posted",
+                                     patch, j, at.tip.x(), at.tip.y(), at.tip.z()));
+    }
+    return;
+  }
   const Eigen::Vector3d& tip = poses.at(size_t(path.failed_pose)).tip;
   throw MachineError(fmt::format("patch '{}': pose {} (tip {:.3f}, {:.3f}, {:.3f} mm) is out of reach: {}", patch,
                                  path.failed_pose, tip.x(), tip.y(), tip.z(), path.why));

@@ -103,6 +103,19 @@ TEST_CASE("out of reach: a tilt beyond the A limits names the pose and the axis"
     CHECK(std::string(e.what()).find("patch 'flank-2': pose 21 (tip 0.000, 0.000, 0.000 mm) is out of reach: rotary axis A") == 0);
   }
 
+  // A path marked reachable whose joints are not all finite numbers is refused too, naming the block.
+  JointPath bad = solve_path(m, std::vector<ToolPose>(poses.begin(), poses.begin() + 5), {}, {});
+  REQUIRE(bad.reachable);
+  REQUIRE(bad.joints.size() >= 4);
+  bad.joints[3].rotary[0] = INFINITY;
+  try {
+    require_reachable(bad, poses, "flank-3");
+    FAIL("no error");
+  } catch (const MachineError& e) {
+    CHECK(std::string(e.what()).find("patch 'flank-3': block 3 (tip ") == 0);
+    CHECK(std::string(e.what()).find("not a finite number") != std::string::npos);
+  }
+
   std::vector<ToolPose> far = {{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d::UnitZ()}, {Eigen::Vector3d(900, 0, 0), Eigen::Vector3d::UnitZ()}};
   const JointPath q = solve_path(m, far, {}, {});
   CHECK_FALSE(q.reachable);
