@@ -262,8 +262,15 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     const RotaryAxis& first = m.rotary[0];
     const double mid = first.continuous ? 0 : 0.5 * (first.min_deg + first.max_deg);
     const auto off_centre = [&](const State& s) { return std::abs(s.deg[0] - mid); };
-    int best = 0;
-    for (size_t c = 1; c < st[n - 1].size(); ++c) {
+    // Only reachable states compete: an unreachable one has no cost and no angles (its unset angles
+    // could look nearer the middle), and backtracking from it would read no predecessor.
+    int best = -1;
+    for (size_t c = 0; c < st[n - 1].size(); ++c) {
+      if (!std::isfinite(st[n - 1][c].cost)) continue;
+      if (best < 0) {
+        best = int(c);
+        continue;
+      }
       const State &a = st[n - 1][c], &b = st[n - 1][size_t(best)];
       const double tie = 1e-9 * std::max(1.0, std::abs(b.cost));
       if (a.cost < b.cost - tie || (std::abs(a.cost - b.cost) <= tie && off_centre(a) < off_centre(b) - 1e-9)) best = int(c);
@@ -456,8 +463,9 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
 
 void require_reachable(const JointPath& path, const std::vector<ToolPose>& poses, const std::string& patch) {
   if (path.reachable) {
-    // A joint that is not a number must never reach a program (seen once on the HECC impeller, cause
-    // not yet traced): the run stops here, naming the pose, instead of posting it.
+    // A joint that is not a number must never reach a program: the run stops here, naming the pose,
+    // instead of posting it (a safeguard; the case seen on the HECC impeller, an unreachable branch
+    // taken at the last pose, is fixed in solve_path).
     for (size_t j = 0; j < path.joints.size(); ++j) {
       const Joints& q = path.joints[j];
       if (q.linear.allFinite() && std::isfinite(q.rotary[0]) && std::isfinite(q.rotary[1])) continue;

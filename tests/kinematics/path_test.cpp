@@ -270,3 +270,26 @@ TEST_CASE("solve_path gives the same joints, inserted poses and singular poses o
   CHECK(a.inserted == b.inserted);
   check_reproduces(m, a, 80);
 }
+
+TEST_CASE("a tilt of 100 degrees on an A table limited to [-120, 30]: one branch is out of reach at every pose, and the path is the other, every joint finite") {
+  // The mirror branch (+100) is beyond A's 30: its state has no cost. The choice at the last pose
+  // must not take it because its unset angle (0) sits nearer the middle of A's range (-45) than -100
+  // does; the HECC impeller's flank set up upside down (A near -109) once got joints that were not
+  // numbers from that.
+  const Machine m = shipped("xyzac-trt");
+  for (double azimuth : {0.0, 90.0, 180.0, 270.0, 33.0}) {
+    CAPTURE(azimuth);
+    std::vector<ToolPose> poses;
+    for (int i = 0; i < 10; ++i) poses.push_back({Eigen::Vector3d(20, 5.0 * i, 10), tilted(100 + 0.5 * i, azimuth + 2.0 * i)});
+    const JointPath p = solve_path(m, poses, {}, PathOptions{});
+    REQUIRE(p.reachable);
+    for (const Joints& j : p.joints) {
+      REQUIRE(j.linear.allFinite());
+      CHECK(j.rotary[0] < -99.9);
+      CHECK(j.rotary[0] > -105.1);
+      CHECK(std::isfinite(j.rotary[1]));
+    }
+    check_reproduces(m, p, PathOptions{}.tool_length_mm);
+    CHECK_NOTHROW(require_reachable(p, poses, "tilted"));
+  }
+}
