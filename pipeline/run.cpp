@@ -313,6 +313,17 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
   settings.options.part = &part_index;
   settings.options.clearance_mm = j.clearance_mm;
   settings.options.gouge_tolerance_mm = j.tolerance_mm;
+  // With a separate part the cut is judged as the fit's check judges it: the part without Φ's coarser
+  // twin by check_tolerance, Φ by the fitted tolerance.
+  std::optional<SurfaceIndex> cut_part, design_work;
+  if (r.fit.fitted.check_part) {
+    cut_part.emplace(to_work(j.post, *r.fit.fitted.check_part));
+    design_work.emplace(to_work(j.post, r.fit.fitted.surface.mesh));
+    settings.options.cut_part = &*cut_part;
+    settings.options.design = &*design_work;
+    settings.options.gouge_tolerance_mm = j.check_tolerance_mm.value_or(j.tolerance_mm);
+    settings.options.design_gouge_tolerance_mm = j.tolerance_mm;
+  }
   const Machine& m = r.machine;
   options.progress(fmt::format("kinematics and post: {} patch(es) on {} ({})", inputs.size(), m.name, m.kind()));
   r.programs = post_programs(

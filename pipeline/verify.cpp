@@ -13,6 +13,7 @@
 #include <sstream>
 
 #include "core/atomic_file.h"
+#include "core/check_surface.h"
 #include "core/errors.h"
 #include "core/mesh.h"
 #include "core/number_format.h"
@@ -140,6 +141,16 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
   VerifyRun run{std::move(job), std::move(m), vo, std::move(design), separate ? separate->mesh() : TriMesh{}, {}};
   const Job& j = run.job;
   const SurfaceIndex& part = separate ? *separate : run.design;
+  // With a separate part the cut is judged as the run's back-simulation judges it: the part without
+  // Φ's coarser twin by check_tolerance, Φ itself by the fitted tolerance.
+  std::optional<SurfaceIndex> cut;
+  VerifyOptions judge = run.options;
+  if (separate) {
+    cut.emplace(check_part(separate->mesh(), run.design, j.tolerance_mm).mesh);
+    judge.cut_part = &*cut;
+    judge.gouge_tolerance_mm = j.check_tolerance_mm.value_or(j.tolerance_mm);
+    judge.design_gouge_tolerance_mm = j.tolerance_mm;
+  }
 
   for (const std::string& file : request.programs) {
     const fs::path path(file);
@@ -176,7 +187,7 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
       r.meridian = vt.assembly.cutter;
       r.tools = {vt};
       r.cl_data = true;
-      r.report = verify_cl(cl, part, vt, run.options, &run.design);
+      r.report = verify_cl(cl, part, vt, judge, &run.design);
     } else {
       std::vector<VerifyTool> tools;
       const std::map<int, std::string> names = tool_names(text);
@@ -209,7 +220,7 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
           r.cl_note = fmt::format("no {} beside the program (or --cl {}=FILE): {} compared with CL-data",
                                   fmt::join(missing, ", "), file, cl.empty() ? "not" : "some tools' blocks not");
       }
-      r.report = verify_text(text, dialect_of_file(file), file, run.machine, part, tools, run.options, &run.design, cl);
+      r.report = verify_text(text, dialect_of_file(file), file, run.machine, part, tools, judge, &run.design, cl);
     }
     r.min_rapid_mm = r.min_feed_mm = {INFINITY, INFINITY, INFINITY};
     for (const VerifiedBlock& b : r.report.blocks) {

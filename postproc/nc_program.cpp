@@ -71,6 +71,9 @@ std::string PostOptions::validate() const {
   if (!(clearance_mm > 0) || !std::isfinite(clearance_mm)) return "clearance_mm: must be > 0";
   if (!(lead_mm > 0) || !std::isfinite(lead_mm)) return "lead_mm: must be > 0";
   if (!(gouge_tolerance_mm > 0) || !std::isfinite(gouge_tolerance_mm)) return "gouge_tolerance_mm: must be > 0";
+  if (!(design_gouge_tolerance_mm > 0) || !std::isfinite(design_gouge_tolerance_mm))
+    return "design_gouge_tolerance_mm: must be > 0";
+  if (!cut_part != !design) return "cut_part and design: give both or neither";
   return {};
 }
 
@@ -216,7 +219,10 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
         tools.push_back({in.cl.tool, assembly_of(in), in.tool_length_mm > 0 ? in.tool_length_mm : o.path.tool_length_mm});
     VerifyOptions vo;
     vo.gouge_tolerance_mm = o.gouge_tolerance_mm;
-    const VerifyReport rep = verify_text(text, o.dialect, name + file_extension(o.dialect), m, *o.part, tools, vo);
+    const bool apart = o.cut_part && o.design;
+    if (apart) vo.cut_part = o.cut_part, vo.design_gouge_tolerance_mm = o.design_gouge_tolerance_mm;
+    const VerifyReport rep = verify_text(text, o.dialect, name + file_extension(o.dialect), m, *o.part, tools, vo,
+                                         apart ? o.design : nullptr);
     const bool links_clear = std::none_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.rapid; });
     if (links_clear || tries >= 2) {
       p.links_checked = true;

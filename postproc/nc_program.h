@@ -94,6 +94,12 @@ struct PostOptions {
   double lead_mm = 2;                // approach / retract off the surface along its normal (at least the
                                      // cutter's radius variation + clearance, so an axial move cannot cut)
   double gouge_tolerance_mm = 0.01;  // back-simulation: the cutter may be this deep in the part in the cut
+  // With a separate part: the cut judged apart (VerifyOptions::cut_part): the part without Φ's twin
+  // (gouge_tolerance_mm) and Φ itself (design_gouge_tolerance_mm), both in the work frame, not owned.
+  // Links are still planned and checked against `part`.
+  const SurfaceIndex* cut_part = nullptr;
+  const SurfaceIndex* design = nullptr;
+  double design_gouge_tolerance_mm = 0.01;
   std::string validate() const;      // empty when valid
 };
 

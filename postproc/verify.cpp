@@ -22,6 +22,8 @@ std::string VerifyOptions::validate() const {
   if (!(report_clearance_mm > 0) || !std::isfinite(report_clearance_mm)) return "report_clearance_mm: must be > 0";
   if (!(cl_tolerance_mm > 0) || !std::isfinite(cl_tolerance_mm)) return "cl_tolerance_mm: must be > 0";
   if (!(cl_angle_tolerance_deg > 0) || !std::isfinite(cl_angle_tolerance_deg)) return "cl_angle_tolerance_deg: must be > 0";
+  if (cut_part && (!(design_gouge_tolerance_mm >= 0) || !std::isfinite(design_gouge_tolerance_mm)))
+    return "design_gouge_tolerance_mm: must be >= 0 when the cut is judged apart";
   return {};
 }
 
@@ -176,17 +178,33 @@ struct SimBlock {
 };
 
 // Sweeps every block's positions: per block and component the smallest gap, and the hits.
-void sweep(const SurfaceIndex& part, const std::vector<SimBlock>& blocks, const VerifyOptions& o, VerifyReport& rep) {
+// Rapids meet the whole part. Feed blocks meet it too, unless the cut is judged apart
+// (VerifyOptions::cut_part with a design surface): then the part without Φ's twin and Φ itself, each
+// with its own gouge tolerance.
+void sweep(const SurfaceIndex& part, const SurfaceIndex* design, const std::vector<SimBlock>& blocks, const VerifyOptions& o,
+           VerifyReport& rep) {
+  struct Judge {  // one surface the assembly is swept against, with what a query there last found
+    const SurfaceIndex* surface;
+    double gouge_tolerance_mm;
+    std::vector<Eigen::Vector3d> last;
+    std::vector<double> slack;
+  };
+  std::vector<Judge> judges{{&part, o.gouge_tolerance_mm, {}, {}}};
+  const bool apart = o.cut_part && design;
+  if (apart) {
+    judges.push_back({o.cut_part, o.gouge_tolerance_mm, {}, {}});
+    judges.push_back({design, o.design_gouge_tolerance_mm, {}, {}});
+  }
   const VerifyTool* current = nullptr;
   std::vector<AxialSample> samples;
-  std::vector<Eigen::Vector3d> last;
-  std::vector<double> slack;
   for (const SimBlock& sb : blocks) {
     if (sb.vt != current) {
       current = sb.vt;
       samples = axial_samples(current->assembly, o);
-      last.assign(samples.size(), Eigen::Vector3d::Constant(INFINITY));
-      slack.assign(samples.size(), -1);
+      for (Judge& j : judges) {
+        j.last.assign(samples.size(), Eigen::Vector3d::Constant(INFINITY));
+        j.slack.assign(samples.size(), -1);
+      }
     }
     const Body body(current->assembly);
     VerifiedBlock vb;
@@ -195,28 +213,32 @@ void sweep(const SurfaceIndex& part, const std::vector<SimBlock>& blocks, const 
     vb.min_clearance_mm.fill(o.report_clearance_mm);
     std::array<VerifyHit, 3> worst;
     for (auto& w : worst) w.depth_mm = -INFINITY;
+    const size_t first = apart && !sb.rapid ? 1 : 0, end = apart && !sb.rapid ? 3 : 1;
     for (const ToolPose& pose : sb.positions) {
       ++rep.positions;
-      for (size_t k = 0; k < samples.size(); ++k) {
-        const Eigen::Vector3d c = pose.tip + samples[k].z * pose.axis;
-        if (slack[k] > 0 && (c - last[k]).norm() < slack[k]) continue;
-        const Footpoint f = part.closest(c);
-        last[k] = c;
-        slack[k] = f.distance - samples[k].reach;
-        if (slack[k] > 0) continue;
-        Component comp;
-        const double g = body.gap(pose, f.point, &comp);
-        double& mc = vb.min_clearance_mm[size_t(comp)];
-        mc = std::min(mc, g);
-        const bool hit = sb.rapid ? g < o.link_clearance_mm
-                                  : (comp == Component::Tool ? -g > o.gouge_tolerance_mm : g < 0);
-        if (hit && -g > worst[size_t(comp)].depth_mm) {
-          VerifyHit& h = worst[size_t(comp)];
-          h.block = sb.block, h.line = sb.line, h.rapid = sb.rapid, h.component = comp;
-          h.tool_change = sb.tool_change;
-          h.depth_mm = -g;
-          h.point = f.point;
-          h.position = int(rep.positions - 1);
+      for (size_t jj = first; jj < end; ++jj) {
+        Judge& j = judges[jj];
+        for (size_t k = 0; k < samples.size(); ++k) {
+          const Eigen::Vector3d c = pose.tip + samples[k].z * pose.axis;
+          if (j.slack[k] > 0 && (c - j.last[k]).norm() < j.slack[k]) continue;
+          const Footpoint f = j.surface->closest(c);
+          j.last[k] = c;
+          j.slack[k] = f.distance - samples[k].reach;
+          if (j.slack[k] > 0) continue;
+          Component comp;
+          const double g = body.gap(pose, f.point, &comp);
+          double& mc = vb.min_clearance_mm[size_t(comp)];
+          mc = std::min(mc, g);
+          const bool hit = sb.rapid ? g < o.link_clearance_mm
+                                    : (comp == Component::Tool ? -g > j.gouge_tolerance_mm : g < 0);
+          if (hit && -g > worst[size_t(comp)].depth_mm) {
+            VerifyHit& h = worst[size_t(comp)];
+            h.block = sb.block, h.line = sb.line, h.rapid = sb.rapid, h.component = comp;
+            h.tool_change = sb.tool_change;
+            h.depth_mm = -g;
+            h.point = f.point;
+            h.position = int(rep.positions - 1);
+          }
         }
       }
     }
@@ -566,10 +588,10 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
     blocks.push_back(std::move(sb));
     cur = target;
   }
-  sweep(part, blocks, o, rep);
+  sweep(part, design, blocks, o, rep);
   if (!cl.empty()) compare_with_cl(blocks, cl, part, o, rep);
   rep.motion = motion_of(blocks);
-  if (design) rep.design = design_deviation(*design, blocks, o.gouge_tolerance_mm);
+  if (design) rep.design = design_deviation(*design, blocks, o.cut_part ? o.design_gouge_tolerance_mm : o.gouge_tolerance_mm);
   return rep;
 }
 
@@ -596,9 +618,9 @@ VerifyReport verify_cl(const ClProgram& cl, const SurfaceIndex& part, const Veri
     if (!mv.rapid && mv.feed_mm_min > 0) sb.minutes = (mv.pose.tip - prev.tip).norm() / mv.feed_mm_min;
     blocks.push_back(std::move(sb));
   }
-  sweep(part, blocks, o, rep);
+  sweep(part, design, blocks, o, rep);
   rep.motion = motion_of(blocks);
-  if (design) rep.design = design_deviation(*design, blocks, o.gouge_tolerance_mm);
+  if (design) rep.design = design_deviation(*design, blocks, o.cut_part ? o.design_gouge_tolerance_mm : o.gouge_tolerance_mm);
   return rep;
 }
 

@@ -39,6 +39,13 @@ struct VerifyOptions {
   // plus what writing 4 decimals and sampling between the linearisation's checks may add.
   double cl_tolerance_mm = 0.005 + 0.002;
   double cl_angle_tolerance_deg = 0.05 + 0.01;
+  // The cut judged apart (a separate part given, and the design surface): the feed blocks are swept
+  // against `cut_part`, the part without its coarser twin of Φ (core/check_surface.h), with
+  // gouge_tolerance_mm (the check tolerance), and against Φ itself with design_gouge_tolerance_mm
+  // (the fit's tolerance), not against the whole part, whose twin would show the fitted cut as a
+  // gouge. Rapids still meet the whole part. Not owned; the same frame as the part.
+  const SurfaceIndex* cut_part = nullptr;
+  double design_gouge_tolerance_mm = -1;
   std::string validate() const;
 };
 

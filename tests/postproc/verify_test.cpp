@@ -6,6 +6,7 @@
 #include <regex>
 #include <sstream>
 
+#include "core/check_surface.h"
 #include "core/errors.h"
 #include "kinematics/machine.h"
 #include "postproc/gcode.h"
@@ -426,4 +427,70 @@ TEST_CASE("machine files: tool_change takes joint values by axis name within the
   CHECK_THROWS_WITH_AS((void)load_machine(file), doctest::Contains("tool_change.Z"), MachineError);
   test::write_text(file, base + "tool_change: {B: 0}\n");  // no B axis
   CHECK_THROWS_WITH_AS((void)load_machine(file), doctest::Contains("B"), MachineError);
+}
+
+TEST_CASE("a part whose coarse twin of the flank stands 0.03 mm proud: judged apart, the cut is held to the design surface and the rest of the part") {
+  const Eigen::Vector3d origin(30, 10, -5);
+  const TriMesh design_mesh = moved(wall(cone), origin);
+  const TriMesh twin = moved(wall([](double z) { return cone(z) - 0.03; }), origin);
+  // A floor (the hub) 1 mm below the tip, reaching under the cutter, or 0.05 mm above the tip.
+  const auto floor = [&](double z) {
+    TriMesh f;
+    for (int j = 0; j <= 8; ++j)
+      for (int i = 0; i <= 8; ++i) f.vertices.push_back(origin + Eigen::Vector3d(-10 + 40.0 * i / 8, -40 + 80.0 * j / 8, z));
+    for (int j = 0; j < 8; ++j)
+      for (int i = 0; i < 8; ++i) {
+        const int a = j * 9 + i;
+        f.faces.push_back({a, a + 1, a + 10});
+        f.faces.push_back({a, a + 10, a + 9});
+      }
+    return f;
+  };
+  const SurfaceIndex design(design_mesh);
+  const Case c = cases()[1];
+  const Posting p = post_wall(c, design, cone, origin);
+  REQUIRE(p.posted.refused.empty());
+  for (const double hub : {-1.0, 0.05}) {
+    CAPTURE(hub);
+    const SurfaceIndex whole(merged(twin, floor(hub))), rest(floor(hub));
+    VerifyOptions o;
+    o.gouge_tolerance_mm = 0.01;
+    // Against the whole part the twin shows the cut as a gouge of 0.03 mm (and the floor, when raised).
+    const VerifyReport plain = verify_text(p.text, c.dialect, "wall", c.machine, whole, p.tools, o, &design);
+    REQUIRE_FALSE(plain.clean());
+    double deepest = 0;
+    for (const VerifyHit& h : plain.hits) deepest = std::max(deepest, h.depth_mm);
+    CHECK(deepest == doctest::Approx(hub > 0 ? 0.05 : 0.03).epsilon(0.1));
+    // Judged apart: the flank against the design surface (within 0.01), the rest against the floor.
+    o.cut_part = &rest;
+    o.design_gouge_tolerance_mm = 0.01;
+    const VerifyReport apart = verify_text(p.text, c.dialect, "wall", c.machine, whole, p.tools, o, &design);
+    if (hub < 0) {
+      CHECK(apart.clean());
+    } else {
+      // (The raised floor also stands in the way of the approach: rapids posted without it hit it.)
+      int gouges = 0;
+      for (const VerifyHit& h : apart.hits) {
+        if (h.rapid) continue;
+        ++gouges;
+        CHECK(h.kind() == "gouge");
+        CHECK(h.depth_mm == doctest::Approx(0.05).epsilon(0.1));
+        CHECK(h.point.z() == doctest::Approx(origin.z() + hub));  // on the floor, not on the flank
+      }
+      CHECK(gouges > 10);
+    }
+    // The design surface itself cut 0.03 mm too deep is a gouge when judged apart.
+    const VerifyReport deep = verify_text(p.text, c.dialect, "wall", c.machine, whole, p.tools, o, nullptr);
+    CHECK(deep.clean() == plain.clean());  // without the design surface nothing is judged apart
+  }
+  // A program 0.03 mm into the design surface: posted against the twin-free design 0.03 mm deeper.
+  const SurfaceIndex sunk(moved(wall([](double z) { return cone(z) - 0.03; }), origin));
+  VerifyOptions o;
+  o.gouge_tolerance_mm = 0.01;
+  const SurfaceIndex rest(floor(-1));
+  o.cut_part = &rest;
+  o.design_gouge_tolerance_mm = 0.01;
+  const VerifyReport into = verify_text(p.text, c.dialect, "wall", c.machine, sunk, p.tools, o, &sunk);
+  REQUIRE_FALSE(into.clean());
+  for (const VerifyHit& h : into.hits) CHECK(h.depth_mm == doctest::Approx(0.03).epsilon(0.1));
 }
