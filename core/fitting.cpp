@@ -645,13 +645,55 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
 }
 }  // namespace
 
-CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const CheckSurface& c, int rows, int samples_s) {
+CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const CheckSurface& c, int rows, int samples_s,
+                           bool enclose) {
   CheckProfile out;
   out.intrusion.assign(size_t(rows), -INFINITY);
   out.body.assign(size_t(rows), 0);
   out.at.assign(size_t(rows), Eigen::Vector3d::Zero());
   if (!c.part || rows < 2) return out;
-  const std::vector<CheckSample> samples = check_samples(rails, tool, c, rows, samples_s);
+  const double L = std::max(rails.length, 1e-12);
+  if (enclose) {
+    // Spheres along the cutter close enough that the dip of their union, h^2 / (8 d), stays below a
+    // quarter of the tolerance (as the collision check samples it), the smallest radius counted from a
+    // tenth of the largest.
+    double dmax = 0;
+    for (int j = 0; j <= 64; ++j) dmax = std::max(dmax, tool.d(j / 64.0));
+    double dmin = dmax;
+    for (int j = 0; j <= 64; ++j) dmin = std::min(dmin, std::max(tool.d(j / 64.0), 0.1 * dmax));
+    const double h = std::sqrt(2 * dmin * std::max(c.tolerance, 1e-9));
+    samples_s = std::clamp(int(std::ceil(L / h)) + 1, samples_s, 512);
+  }
+  std::vector<CheckSample> samples = check_samples(rails, tool, c, rows, samples_s);
+  if (enclose) {
+    // Each sphere grown to enclose its slab of the solid (half the spacing on both sides), so a part
+    // point between two samples cannot come nearer than the samples say.
+    const double half_s = 0.5 / (samples_s - 1);
+    for (CheckSample& cs : samples) {
+      if (cs.j >= 0) {
+        const double d = tool.d(cs.s);
+        const double slab = std::max({d, tool.d(std::max(0.0, cs.s - half_s)), tool.d(std::min(1.0, cs.s + half_s))});
+        cs.offset += std::hypot(half_s * L, slab) - d;
+      }
+    }
+    std::vector<double> grow(c.body.size());
+    for (size_t k = 0; k < c.body.size(); ++k) {
+      const double du = std::max(k > 0 ? c.body[k].x() - c.body[k - 1].x() : 0.0,
+                                 k + 1 < c.body.size() ? c.body[k + 1].x() - c.body[k].x() : 0.0);
+      double r = c.body[k].y();
+      if (k > 0) r = std::max(r, c.body[k - 1].y());
+      if (k + 1 < c.body.size()) r = std::max(r, c.body[k + 1].y());
+      grow[k] = std::hypot(0.5 * du, r) - c.body[k].y();
+    }
+    // check_samples lists each row's body samples last, in the order of c.body.
+    size_t k = 0;
+    int row = -1;
+    for (CheckSample& cs : samples) {
+      if (!cs.body) continue;
+      if (cs.i != row) row = cs.i, k = 0;
+      cs.offset += grow[k++];
+    }
+  }
   const std::vector<CheckDistance> dist = check_distances(rails, c, samples, rows);
   for (size_t k = 0; k < samples.size(); ++k) {
     const CheckSample& cs = samples[k];

@@ -143,8 +143,11 @@ struct CheckProfile {
   std::vector<char> body;
   std::vector<Eigen::Vector3d> at;  // the part point there
 };
+// `enclose`: as the collision check judges (core/collision.h), for deciding what to trim: the cutter
+// sampled densely enough for the tolerance and every sample grown to enclose its slab of the solid;
+// otherwise the fit's own samples (samples_s along the cutter).
 [[nodiscard]] CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const CheckSurface& check,
-                                         int rows, int samples_s);
+                                         int rows, int samples_s, bool enclose = false);
 
 // Which way the holder should stand for a motion against a check surface: the end of the axis
 // whose shank and holder (check.body) enter the part in fewer rows (then by less), as a direction

@@ -100,7 +100,7 @@ std::pair<double, double> longest_run(const std::vector<char>& ok) {
 // The rows (as many as Ω's) where the tool keeps out of the check surface, and the worst row.
 std::vector<char> clear_rows(const PatchFit& f, const PatchOptions& o, CheckProfile& profile) {
   const int rows = f.machined.omega.n_t;
-  profile = check_profile(f.fit.rails, f.fit.tool, o.fit.check, rows, o.fit.samples_s);
+  profile = check_profile(f.fit.rails, f.fit.tool, o.fit.check, rows, o.fit.samples_s, true);
   std::vector<char> ok(size_t(rows), 1);
   for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(profile.intrusion[size_t(i)] > 0);
   return ok;

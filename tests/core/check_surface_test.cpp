@@ -7,6 +7,7 @@
 #include <cmath>
 
 #include "core/check_surface.h"
+#include "core/collision.h"
 #include "core/fitting.h"
 #include "core/patch.h"
 
@@ -321,4 +322,59 @@ TEST_CASE("a ball end is checked as its ball: shortened less than a flat end ove
   CHECK(!f.check_refused);
   CHECK(tip_z > 1.7);
   CHECK(tip_z < 2.9);
+}
+
+TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's body samples: trimmed, and the collision check agrees") {
+  // The shank (Ø6, z 20-40 over the upright motion) passes a thin fin at z 24.45-24.55 whose edge
+  // is 3.99 mm from the axis (clearance 1 mm: 0.01 inside it) for y >= 40. The fit's body samples
+  // (every mm) see it 4.015 mm away, outside the clearance; the trim grows them to enclose their
+  // slabs of the shank (as the collision check samples it) and stops the motion before the fin.
+  Setup s;
+  const TriMesh fin_mm = box({8.99, 40, 24.45}, {30, 80, 24.55}, 2);
+  const SurfaceIndex fin(to_unit(fin_mm, s.fr)), fin_index_mm(fin_mm);
+  PatchOptions po = s.patch_options();
+  po.fit.check.part = &fin;
+  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
+  po.fit.check.clearance = s.fr.length_to_unit(1.0);
+  // A shank of 20 mm here (the fit's samples are balls: the holder's, Ø22 with the clearance,
+  // would reach down to the fin from a 10 mm shank's end).
+  for (int k = 0; k <= 40; ++k) po.fit.check.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(k <= 20 ? 3.0 : 10.0));
+  const PatchSpec spec = s.upright();
+  // The motion and the assembly in mm, checked as the job's collision check does.
+  const auto collisions = [&](const PatchFit& f) {
+    std::vector<ToolPose> poses;
+    for (int i = 0; i <= 100; ++i) {
+      const Eigen::Vector3d a = s.fr.to_mm(f.fit.rails.a.point(i / 100.0)), b = s.fr.to_mm(f.fit.rails.b.point(i / 100.0));
+      poses.push_back({a, (b - a).normalized()});
+    }
+    ToolAssembly t;
+    const double L = s.fr.length_to_mm(f.fit.rails.length);
+    for (int j = 0; j <= 100; ++j) t.cutter.emplace_back(L * j / 100, s.fr.length_to_mm(f.fit.tool.d(j / 100.0)));
+    t.shank_length = 20, t.shank_diameter = 6, t.holder_length = 20, t.holder_diameter = t.holder_diameter_far = 20;
+    CollisionOptions co;
+    co.clearance_mm = 1.0;
+    co.gouge_tolerance_mm = 0.005;
+    return check_collisions(fin_index_mm, poses, t, co);
+  };
+  PatchOptions free = po;
+  free.fit.check = {};
+  const PatchFit g = fit_patch(s.phi, spec, free);
+  // Unchecked, the motion runs on to y = 50: the shank passes the fin 0.99 mm off, and the fit's own
+  // samples (not grown) call every row clear.
+  const CollisionReport before = collisions(g);
+  REQUIRE_FALSE(before.clear());
+  CHECK(before.intervals.front().component == Component::Shank);
+  const CheckProfile coarse = check_profile(g.fit.rails, g.fit.tool, po.fit.check, 50, po.fit.samples_s);
+  CHECK(*std::max_element(coarse.intrusion.begin(), coarse.intrusion.end()) <= 0);
+  const CheckProfile grown = check_profile(g.fit.rails, g.fit.tool, po.fit.check, 50, po.fit.samples_s, true);
+  CHECK(*std::max_element(grown.intrusion.begin(), grown.intrusion.end()) > 0);
+  // Checked: trimmed before the fin (the shank's circle keeps 1 mm from the fin's corner at y = 40),
+  // and the collision check finds nothing on what is left.
+  const PatchFit f = fit_patch(s.phi, spec, po);
+  const double y_end = s.fr.to_mm(f.fit.rails.a.point(1)).y();
+  MESSAGE("t ", f.t_from, "-", f.t_to, ", motion ends at y = ", y_end, " mm, coverage ", f.coverage, " (unchecked ", g.coverage, ")");
+  CHECK(f.t_to < 0.85);
+  CHECK(y_end < 39.72);
+  CHECK(y_end > 38.0);
+  CHECK(collisions(f).clear());
 }
