@@ -55,14 +55,12 @@ inline RunResult run_flankcam(const std::string& args, const ScratchDir& dir) {
 }
 #endif
 
-// A wavy height field z = f(x, y) on an nx x ny grid over [0, sx] x [0, sy] (mm).
-inline TriMesh wavy_grid(int nx, int ny, double sx, double sy, double amplitude) {
+// A grid of nx x ny points point(i, j) (i fastest), each cell split into two triangles.
+template <class Point>
+TriMesh grid_mesh(int nx, int ny, Point point) {
   TriMesh m;
   for (int j = 0; j < ny; ++j)
-    for (int i = 0; i < nx; ++i) {
-      const double x = sx * i / (nx - 1), y = sy * j / (ny - 1);
-      m.vertices.emplace_back(x, y, amplitude * std::sin(0.11 * x) * std::cos(0.07 * y + 0.3 * std::sin(0.05 * x)));
-    }
+    for (int i = 0; i < nx; ++i) m.vertices.push_back(point(i, j));
   for (int j = 0; j + 1 < ny; ++j)
     for (int i = 0; i + 1 < nx; ++i) {
       const int v = j * nx + i;
@@ -70,6 +68,14 @@ inline TriMesh wavy_grid(int nx, int ny, double sx, double sy, double amplitude)
       m.faces.push_back({v, v + nx + 1, v + nx});
     }
   return m;
+}
+
+// A wavy height field z = f(x, y) on an nx x ny grid over [0, sx] x [0, sy] (mm).
+inline TriMesh wavy_grid(int nx, int ny, double sx, double sy, double amplitude) {
+  return grid_mesh(nx, ny, [&](int i, int j) {
+    const double x = sx * i / (nx - 1), y = sy * j / (ny - 1);
+    return Eigen::Vector3d(x, y, amplitude * std::sin(0.11 * x) * std::cos(0.07 * y + 0.3 * std::sin(0.05 * x)));
+  });
 }
 
 // An exact envelope of an analytic motion, scaled to a unit diagonal (the fitting's frame).

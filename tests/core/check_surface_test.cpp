@@ -10,22 +10,14 @@
 #include "core/collision.h"
 #include "core/fitting.h"
 #include "core/patch.h"
+#include "tests/test_util.h"
 
 using namespace flankcam;
 
 namespace {
 // The flank x = 0 over y in [0, 60], z in [0, 20] (mm), normals +x (out of the material, x < 0).
 TriMesh flank(int ny = 31, int nz = 11) {
-  TriMesh m;
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j) m.vertices.emplace_back(0, 60.0 * j / (ny - 1), 20.0 * k / (nz - 1));
-  for (int k = 0; k + 1 < nz; ++k)
-    for (int j = 0; j + 1 < ny; ++j) {
-      const int v = k * ny + j;
-      m.faces.push_back({v, v + 1, v + ny + 1});
-      m.faces.push_back({v, v + ny + 1, v + ny});
-    }
-  return m;
+  return test::grid_mesh(ny, nz, [&](int j, int k) { return Eigen::Vector3d(0, 60.0 * j / (ny - 1), 20.0 * k / (nz - 1)); });
 }
 
 // A closed box, faces outward; each side split into n x n squares.

@@ -435,16 +435,7 @@ TEST_CASE("a part whose coarse twin of the flank stands 0.03 mm proud: judged ap
   const TriMesh twin = moved(wall([](double z) { return cone(z) - 0.03; }), origin);
   // A floor (the hub) 1 mm below the tip, reaching under the cutter, or 0.05 mm above the tip.
   const auto floor = [&](double z) {
-    TriMesh f;
-    for (int j = 0; j <= 8; ++j)
-      for (int i = 0; i <= 8; ++i) f.vertices.push_back(origin + Eigen::Vector3d(-10 + 40.0 * i / 8, -40 + 80.0 * j / 8, z));
-    for (int j = 0; j < 8; ++j)
-      for (int i = 0; i < 8; ++i) {
-        const int a = j * 9 + i;
-        f.faces.push_back({a, a + 1, a + 10});
-        f.faces.push_back({a, a + 10, a + 9});
-      }
-    return f;
+    return test::grid_mesh(9, 9, [&](int i, int j) { return Eigen::Vector3d(origin + Eigen::Vector3d(-10 + 5.0 * i, -40 + 10.0 * j, z)); });
   };
   const SurfaceIndex design(design_mesh);
   const Case c = cases()[1];
