@@ -1,6 +1,7 @@
 #include "core/check_surface.h"
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <utility>
 
@@ -37,15 +38,22 @@ CheckPart check_part(const TriMesh& part, const SurfaceIndex& design, double wit
     sum += face_area(part, int(f)) * agree[f];
   }
   const double sign = sum < 0 ? -1.0 : 1.0;
+  out.twin.assign(part.faces.size(), 0);
+  std::vector<Eigen::Vector3d> between;  // twin faces' centroids and edge midpoints
   for (size_t f = 0; f < part.faces.size(); ++f) {
     std::array<int, 3> face = part.faces[f];
     if (candidate[f] && sign * agree[f] > 0.5) {
       ++out.twin_faces;
+      out.twin[f] = 1;
+      const Eigen::Vector3d &a = part.vertices[size_t(face[0])], &b = part.vertices[size_t(face[1])],
+                            &c = part.vertices[size_t(face[2])];
+      between.insert(between.end(), {(a + b + c) / 3, (a + b) / 2, (b + c) / 2, (c + a) / 2});
       continue;
     }
     if (flip) std::swap(face[1], face[2]);
     out.mesh.faces.push_back(face);
   }
+  for (const Footpoint& q : design.closest(between)) out.twin_sag = std::max(out.twin_sag, q.distance);
   // Only the vertices the kept faces use.
   std::vector<int> index(part.vertices.size(), -1);
   std::vector<Eigen::Vector3d> used;

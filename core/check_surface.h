@@ -15,6 +15,10 @@ struct CheckPart {
   TriMesh mesh;            // the part without Φ's twin, faces out of the material
   int twin_faces = 0;      // faces left out: on Φ (all three corners within `within`, normal along Φ's)
   bool turned_outward = false;  // a closed part whose faces pointed inwards was turned
+  std::vector<char> twin;       // per face of the part given: 1 for a face of Φ's twin
+  // The farthest a twin face stands off Φ (its centroid and edge midpoints): a coarse twin's
+  // chords sag off the fine design surface (0.05 mm on the HECC impeller's blade).
+  double twin_sag = 0;
 };
 
 // The part's faces whose three corners lie within `within` of Φ (its boundary included) and whose

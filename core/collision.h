@@ -47,6 +47,11 @@ struct CollisionOptions {
   // instead of running for hours (a 50 m part); within them a check takes at most minutes.
   int max_positions = 1000000;   // 48 MB of poses
   double max_work = 2e8;         // positions x samples (examples/conical-tool: 100 x ~200)
+  // The part without Φ's twin (core/check_surface.h) next to Φ: a cutter hit at a part point within
+  // design_within_mm of Φ (the twin's sag plus the tolerance: where the part's coarse faces meet the
+  // hole the twin left, e.g. a blade's top face at its coarse edge) is Φ's, left to Φ's own check.
+  const SurfaceIndex* design = nullptr;
+  double design_within_mm = 0;
   // Called with the share of the work done (0..1), from one thread at a time; may be empty.
   std::function<void(double)> progress;
   std::string validate() const;

@@ -557,7 +557,8 @@ struct CheckSample {
 // The samples of every row. The cutter has flat ends (the canal surface cut off at the tip and at
 // the shoulder): its spheres that fit between the ends, and rims of 12 points near both ends; then
 // the body (shank, holder) beyond the holder-side end.
-std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, const CheckSurface& c, int m, int n) {
+std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, const CheckSurface& c, int m, int n,
+                                       int rim_points = 12) {
   std::vector<CheckSample> out;
   bool body_at_b = true;
   if (c.up) body_at_b = mean_axis(r).dot(*c.up) >= 0;
@@ -582,7 +583,7 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
     ball_s = std::min(ball_r / L, 0.5);
     if (!body_at_b) ball_s = 1 - ball_s;
   }
-  constexpr int kRim = 12;
+  const int kRim = rim_points;
   for (int i = 0; i < m; ++i) {
     const double t = double(i) / (m - 1);
     for (int j = 0; j < n; ++j) {
@@ -608,16 +609,20 @@ struct CheckDistance {
   double distance = INFINITY;
   Eigen::Vector3d g = Eigen::Vector3d::Zero(), q = Eigen::Vector3d::Zero();
 };
-CheckDistance check_distance(const SurfaceIndex& part, const Eigen::Vector3d& p, const Footpoint& f, const Footpoint* whole,
-                             const SurfaceIndex* solid, double tolerance) {
+CheckDistance check_distance(const CheckSurface& c, const Eigen::Vector3d& p, const Footpoint& f, const Footpoint* whole) {
   CheckDistance out;
+  const SurfaceIndex& part = *c.part;
   if (f.face < 0 || !std::isfinite(f.distance)) return out;
   const Eigen::Vector3d nf = face_normal(part.mesh(), f.face);
   const Eigen::Vector3d v = p - f.point;
   double sign = 1;
-  if (solid && whole && whole->face >= 0) {
-    // Inside is decided by the whole part (closed, with Φ's twin): more than the tolerance inside it.
-    sign = (p - whole->point).dot(face_normal(solid->mesh(), whole->face)) < -tolerance ? -1.0 : 1.0;
+  if (c.solid && whole && whole->face >= 0) {
+    // Inside is decided by the whole part (closed, with Φ's twin): more than the tolerance inside it;
+    // behind a face of the twin, more than the twin's own sag off Φ besides (its coarse chords may
+    // stand proud of Φ, which the cutter touches by construction).
+    const bool twin = c.solid_twin && size_t(whole->face) < c.solid_twin->size() && (*c.solid_twin)[size_t(whole->face)];
+    const double margin = c.tolerance + (twin ? c.twin_sag : 0.0);
+    sign = (p - whole->point).dot(face_normal(c.solid->mesh(), whole->face)) < -margin ? -1.0 : 1.0;
   } else {
     // The sign is that of the closest face's normal, except at the part's boundary (where a
     // point in front of a hole is outside though the face normal next to its edge may say otherwise).
@@ -640,7 +645,7 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
   if (c.solid) whole = c.solid->closest(pts);
   std::vector<CheckDistance> out(samples.size());
   for (size_t k = 0; k < samples.size(); ++k)
-    out[k] = check_distance(*c.part, pts[k], fps[k], c.solid ? &whole[k] : nullptr, c.solid, c.tolerance);
+    out[k] = check_distance(c, pts[k], fps[k], c.solid ? &whole[k] : nullptr);
   return out;
 }
 }  // namespace
@@ -664,8 +669,20 @@ CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const Che
     const double h = std::sqrt(2 * dmin * std::max(c.tolerance, 1e-9));
     samples_s = std::clamp(int(std::ceil(L / h)) + 1, samples_s, 512);
   }
-  std::vector<CheckSample> samples = check_samples(rails, tool, c, rows, samples_s);
+  // Rims: enough points that the circle sags between two of them by under a quarter of the tolerance.
+  int rim_points = 12;
+  double rim_sag = 0;
   if (enclose) {
+    double dmax = 0;
+    for (int j = 0; j <= 64; ++j) dmax = std::max(dmax, tool.d(j / 64.0));
+    const double step = std::acos(std::clamp(1 - 0.25 * std::max(c.tolerance, 1e-9) / std::max(dmax, 1e-12), -1.0, 1.0));
+    rim_points = std::clamp(int(std::ceil(M_PI / std::max(step, 1e-9))), 12, 720);
+    rim_sag = dmax * (1 - std::cos(M_PI / rim_points));
+  }
+  std::vector<CheckSample> samples = check_samples(rails, tool, c, rows, samples_s, rim_points);
+  if (enclose) {
+    for (CheckSample& cs : samples)
+      if (!cs.body && cs.j < 0 && cs.shift.squaredNorm() > 0) cs.offset += rim_sag;
     // Each sphere grown to enclose its slab of the solid (half the spacing on both sides), so a part
     // point between two samples cannot come nearer than the samples say.
     const double half_s = 0.5 / (samples_s - 1);

@@ -65,6 +65,11 @@ struct CheckSurface {
   // inside when it lies more than `tolerance` inside this one (the sign of its closest face), which
   // stays right in front of the hole the twin leaves in `part`. Unset: `part`'s own faces decide.
   const SurfaceIndex* solid = nullptr;
+  // Which faces of `solid` are Φ's twin (CheckPart::twin), and how far its chords stand off Φ at
+  // most (CheckPart::twin_sag): behind a twin face a point is inside only when deeper than
+  // tolerance + twin_sag. Unset: every face of `solid` counts alike.
+  const std::vector<char>* solid_twin = nullptr;
+  double twin_sag = 0;
   double tolerance = 0;   // how deep the cutter may enter the part
   double clearance = 0;   // how far shank and holder stay from it
   std::vector<Eigen::Vector2d> body;  // (u beyond the cutter end, radius), u > 0 increasing

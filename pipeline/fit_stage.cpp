@@ -156,6 +156,8 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   o.gouge_tolerance_mm = job.tolerance_mm;
   CollisionOptions o_part = o;
   o_part.gouge_tolerance_mm = job.check_tolerance_mm.value_or(job.tolerance_mm);
+  o_part.design = &design;
+  o_part.design_within_mm = f.check_twin_sag_mm + job.tolerance_mm;
   const auto check = [&](const std::vector<ToolPose>& poses, const ToolAssembly& assembly) {
     CollisionReport r = check_collisions(design, poses, assembly, o);
     if (check_index) {
@@ -383,15 +385,22 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   // The part as the fit's check surface (without Φ's twin), unit frame; loaded before any fit so a
   // bad part file fails first.
   std::optional<SurfaceIndex> check_index, solid_index;
+  std::vector<char> twin_faces;  // of solid_index
+  double twin_sag = 0;           // unit frame
   if (const std::optional<LoadedMesh> part = load_job_part(job)) {
     const CheckPart cp = check_part(transformed(part->mesh, out.frame), index, out.frame.length_to_unit(job.tolerance_mm));
     out.part = part->mesh;
     out.check_part = cp.mesh;
     for (Eigen::Vector3d& v : out.check_part->vertices) v = out.frame.to_mm(v);
     out.check_twin_faces = cp.twin_faces;
-    progress(fmt::format("part {}: {} triangles, {} of them the design surface's twin (left to the surface itself){}; the fit "
-                         "keeps the tool out of the rest",
-                         job.part.string(), part->mesh.faces.size(), cp.twin_faces, cp.turned_outward ? ", turned outward" : ""));
+    twin_faces = cp.twin;
+    twin_sag = cp.twin_sag;
+    out.check_twin_sag_mm = out.frame.length_to_mm(cp.twin_sag);
+    progress(fmt::format("part {}: {} triangles, {} of them the design surface's twin (left to the surface itself{}){}; the "
+                         "fit keeps the tool out of the rest",
+                         job.part.string(), part->mesh.faces.size(), cp.twin_faces,
+                         cp.twin_faces ? fmt::format(", up to {:.3f} mm off it", out.frame.length_to_mm(cp.twin_sag)) : "",
+                         cp.turned_outward ? ", turned outward" : ""));
     check_index.emplace(cp.mesh);
     TriMesh whole = transformed(part->mesh, out.frame);
     if (cp.turned_outward)
@@ -409,6 +418,8 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     if (check_index) {
       o.check.part = &*check_index;
       o.check.solid = &*solid_index;
+      o.check.solid_twin = &twin_faces;
+      o.check.twin_sag = twin_sag;
       o.check.tolerance = out.frame.length_to_unit(job.check_tolerance_mm.value_or(job.tolerance_mm));
       o.check.clearance = out.frame.length_to_unit(job.clearance_mm);
       o.check.body = body_samples(job.holder, out.frame);

@@ -68,6 +68,7 @@ struct FittedJob {
   // fit's check surface and, with the design surface, what the collision check judges.
   std::optional<TriMesh> check_part;
   int check_twin_faces = 0;
+  double check_twin_sag_mm = 0;  // CheckPart::twin_sag
   // `patches: auto`: the detected patches as jobs (init: lines), complete before any FittedPatch::job
   // points into it; a moved vector keeps its elements, so FittedJob stays movable.
   std::vector<PatchJob> detected;

@@ -323,6 +323,7 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     settings.options.design = &*design_work;
     settings.options.gouge_tolerance_mm = j.check_tolerance_mm.value_or(j.tolerance_mm);
     settings.options.design_gouge_tolerance_mm = j.tolerance_mm;
+    settings.options.design_within_mm = r.fit.fitted.check_twin_sag_mm + j.tolerance_mm;
   }
   const Machine& m = r.machine;
   options.progress(fmt::format("kinematics and post: {} patch(es) on {} ({})", inputs.size(), m.name, m.kind()));

@@ -146,8 +146,10 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
   std::optional<SurfaceIndex> cut;
   VerifyOptions judge = run.options;
   if (separate) {
-    cut.emplace(check_part(separate->mesh(), run.design, j.tolerance_mm).mesh);
+    const CheckPart cp = check_part(separate->mesh(), run.design, j.tolerance_mm);
+    cut.emplace(cp.mesh);
     judge.cut_part = &*cut;
+    judge.design_within_mm = cp.twin_sag + j.tolerance_mm;
     judge.gouge_tolerance_mm = j.check_tolerance_mm.value_or(j.tolerance_mm);
     judge.design_gouge_tolerance_mm = j.tolerance_mm;
   }

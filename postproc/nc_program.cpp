@@ -220,7 +220,8 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
     VerifyOptions vo;
     vo.gouge_tolerance_mm = o.gouge_tolerance_mm;
     const bool apart = o.cut_part && o.design;
-    if (apart) vo.cut_part = o.cut_part, vo.design_gouge_tolerance_mm = o.design_gouge_tolerance_mm;
+    if (apart)
+      vo.cut_part = o.cut_part, vo.design_gouge_tolerance_mm = o.design_gouge_tolerance_mm, vo.design_within_mm = o.design_within_mm;
     const VerifyReport rep = verify_text(text, o.dialect, name + file_extension(o.dialect), m, *o.part, tools, vo,
                                          apart ? o.design : nullptr);
     const bool links_clear = std::none_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.rapid; });

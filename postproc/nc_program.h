@@ -100,6 +100,7 @@ struct PostOptions {
   const SurfaceIndex* cut_part = nullptr;
   const SurfaceIndex* design = nullptr;
   double design_gouge_tolerance_mm = 0.01;
+  double design_within_mm = 0;       // VerifyOptions::design_within_mm
   std::string validate() const;      // empty when valid
 };
 

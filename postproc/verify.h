@@ -46,6 +46,9 @@ struct VerifyOptions {
   // gouge. Rapids still meet the whole part. Not owned; the same frame as the part.
   const SurfaceIndex* cut_part = nullptr;
   double design_gouge_tolerance_mm = -1;
+  // A cutter hit on `cut_part` within this of Φ is Φ's (the twin's sag plus the tolerance: the cut
+  // part's coarse edges along the hole the twin left), left to Φ's own judgement.
+  double design_within_mm = 0;
   std::string validate() const;
 };
 

@@ -296,3 +296,38 @@ TEST_CASE("flankcam fit with a part: the part's twin of the flank is left to the
   CHECK(bad.err.find("bad.yaml:2: check_tolerance: needs part:") != std::string::npos);
   CHECK_FALSE(std::filesystem::exists(dir.file("bad")));
 }
+
+TEST_CASE("flankcam run with a part whose coarse twin of a dished flank stands 0.09 mm proud: the program is judged against the flank and the rest of the part, not the twin") {
+  test::ScratchDir dir("cli-run-twin");
+  // The flank dished by 0.09 mm in its middle, x = -0.09 (1 - ((y - 30) / 30)^2) (y 0..60, z 0..20);
+  // the part: the blade block behind it, whose flank side is one coarse quad through the flank's
+  // corners, so it stands up to 0.09 mm proud of the flank. The tool cuts the flank; against the
+  // block it would be a 0.09 mm "gouge", far beyond the 0.005 mm tolerance.
+  const flankcam::TriMesh flank = test::grid_mesh(31, 11, [](int j, int k) {
+    const double y = 2.0 * j, u = (y - 30) / 30;
+    return Eigen::Vector3d(-0.09 * (1 - u * u), y, 2.0 * k);
+  });
+  test::write_text(dir.file("flank.obj"), obj_text(flank));
+  test::write_text(dir.file("part.obj"), obj_text(box_mesh({-10, 0, 0}, {0, 60, 20})));
+  const std::string job =
+      "surface: flank.obj\n"
+      "part: part.obj\n"
+      "holder: {shank_length: 10, shank_diameter: 6, length: 20, diameter: 16, diameter_far: 16}\n"
+      "tool: {shape: cylinder}\n"
+      "tolerance: 0.005\n"
+      "machine: xyzac-trt\n"
+      "post: {dialects: [linuxcnc]}\n"
+      "patches:\n  - name: flank\n    init: lines\n    lines:\n"
+      "      - [5, 5, 0, 5, 5, 20]\n      - [5, 20, 0, 5, 20, 20]\n      - [5, 35, 0, 5, 35, 20]\n      - [5, 50, 0, 5, 50, 20]\n";
+  test::write_text(dir.file("job.yaml"), job);
+  const test::RunResult run = test::run_flankcam("run " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
+  REQUIRE_MESSAGE(run.code == 0, run.err);
+  CHECK(run.err.find("2 of them the design surface's twin (left to the surface itself, up to 0.090 mm off it)") != std::string::npos);
+  CHECK(std::filesystem::exists(dir.file("out/flank.ngc")));
+  // What the back-simulation of the written program says: the flank within 0.005 mm where it is cut.
+  const nlohmann::json report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const auto& p = report["patches"][0];
+  CHECK(p["collisions"].empty());
+  CHECK(double(p["eps_opt_mm"]) < 0.005);
+  CHECK(double(p["coverage"]) > 0.6);
+}
