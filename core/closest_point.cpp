@@ -239,6 +239,62 @@ struct SurfaceIndex::Impl {
   std::vector<int> near_begin, near_leaf;
   std::vector<double> reach;                // per leaf
   std::vector<Eigen::Vector3d> centre;      // per leaf
+  // Cell grid (queries on or next to the surface, any mesh size): cubes of side grid_h from
+  // grid_lo; a cell lists every leaf whose corners' axis-aligned box, widened by grid_reach, meets
+  // it (cell_leaf[c.begin .. c.end), ascending). A face within grid_reach of p is in a leaf listed
+  // by p's cell, so when the nearest listed face is nearer than grid_reach the search ends there,
+  // without the descent from the root; a query whose cell is not stored is farther than grid_reach
+  // from every face. Cells are found by open addressing on their packed coordinates.
+  struct Cell {
+    uint64_t key = kNoCell;
+    uint32_t begin = 0, end = 0;
+  };
+  static constexpr uint64_t kNoCell = ~uint64_t(0);
+  std::vector<Cell> cells;                  // hash table, a power of two long; empty: no grid
+  std::vector<int> cell_leaf;
+  Eigen::Vector3d grid_lo = Eigen::Vector3d::Zero();
+  double grid_h = 0, grid_reach = 0;
+  static uint64_t cell_hash(uint64_t key) {
+    key ^= key >> 31;
+    key *= 0x9e3779b97f4a7c15ULL;
+    return key ^ (key >> 29);
+  }
+  // The packed coordinates of p's cell; false outside the grid (or p not finite).
+  bool cell_key(const Eigen::Vector3d& p, uint64_t& key) const {
+    key = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double c = std::floor((p[k] - grid_lo[k]) / grid_h);
+      if (!(c >= 0 && c < double(1 << 21))) return false;
+      key = key << 21 | uint64_t(c);
+    }
+    return true;
+  }
+  // The cell of p, or nullptr when none is stored (or p is outside the grid).
+  const Cell* cell_of(const Eigen::Vector3d& p) const {
+    uint64_t key = 0;
+    if (cells.empty() || !cell_key(p, key)) return nullptr;
+    const size_t mask = cells.size() - 1;
+    for (size_t i = cell_hash(key) & mask;; i = (i + 1) & mask) {
+      if (cells[i].key == key) return &cells[i];
+      if (cells[i].key == kNoCell) return nullptr;
+    }
+  }
+  // A batch fetches ahead: the table slot of a later query's cell, then (the slot in cache) its
+  // list and the bounds of the leaves listed.
+  void prefetch_slot(const Eigen::Vector3d& p) const {
+    uint64_t key = 0;
+    if (!cells.empty() && cell_key(p, key)) __builtin_prefetch(&cells[cell_hash(key) & (cells.size() - 1)]);
+  }
+  void prefetch_cell(const Eigen::Vector3d& p) const {
+    if (const Cell* c = cell_of(p)) {
+      for (uint32_t k = c->begin; k < c->end; k += 16) __builtin_prefetch(&cell_leaf[k]);
+      for (uint32_t k = c->begin; k < c->end; ++k) {
+        const char* b = reinterpret_cast<const char*>(&bounds[size_t(cell_leaf[k])]);
+        for (size_t o = 0; o < sizeof(LeafBound); o += 64) __builtin_prefetch(b + o);
+      }
+    }
+  }
+  void build_grid();
 
   double face_distance2(int f, const Eigen::Vector3d& p) const {
     const auto& F = mesh.faces[f];
@@ -473,6 +529,119 @@ void SurfaceIndex::Impl::build() {
   prefetching = wide.size() * sizeof(Node4) + bounds.size() * (sizeof(LeafBound) + kLeafFaces * sizeof(LeafFace)) > (8u << 20);
 }
 
+// The cell grid of search(): the cell side is the median extent of a leaf's box and the reach a
+// tenth of it, so that a cell lists a few leaves; a mesh whose leaves vary so much in size that the
+// lists would exceed kGridEntries per leaf gets coarser cells (or none). A leaf is listed by the
+// cells that one of its faces, widened by the reach, may meet: those of the face's widened box
+// that its widened plane passes through. Built on all threads, the same at any thread count.
+void SurfaceIndex::Impl::build_grid() {
+  constexpr double kGridEntries = 24, kReach = 0.1;
+  const int leaves = int(bounds.size()), nf = int(mesh.faces.size());
+  std::vector<double> extent(static_cast<size_t>(leaves));
+  bool finite = true;
+#pragma omp parallel for schedule(static) reduction(&& : finite) if (leaves > 20000)
+  for (int l = 0; l < leaves; ++l) {
+    Eigen::Vector3d a = Eigen::Vector3d::Constant(INFINITY), b = Eigen::Vector3d::Constant(-INFINITY);
+    for (int k = l * kLeafFaces; k < std::min(nf, (l + 1) * kLeafFaces); ++k)
+      for (const Eigen::Vector3d* v : {&tri[size_t(k)].a, &tri[size_t(k)].b, &tri[size_t(k)].c}) a = a.cwiseMin(*v), b = b.cwiseMax(*v);
+    finite = finite && a.allFinite() && b.allFinite();
+    extent[size_t(l)] = (b - a).maxCoeff();
+  }
+  if (!finite || leaves == 0) return;  // (a mesh with non-finite corners: no grid)
+  std::nth_element(extent.begin(), extent.begin() + leaves / 2, extent.end());
+  double h = extent[size_t(leaves / 2)];
+  if (!(h > 1e3 * slack)) return;
+  // Rounding of the widened boxes and planes: covered by a few slacks more.
+  const double pad = 4 * slack;
+  int leaf_bits = 1;
+  while ((1L << leaf_bits) < leaves) ++leaf_bits;
+  for (int attempt = 0; attempt < 4; ++attempt, h *= 2) {
+    const double reach_now = kReach * h;
+    const Eigen::Vector3d origin = box.min - Eigen::Vector3d::Constant(reach_now + h);
+    long dim[3];
+    for (int k = 0; k < 3; ++k) dim[k] = long((box.max[k] + reach_now - origin[k]) / h) + 3;
+    if (std::max({dim[0], dim[1], dim[2]}) >= (1L << 21) || double(dim[0]) * double(dim[1]) * double(dim[2]) >= std::ldexp(1.0, 63 - leaf_bits))
+      continue;
+    // Leaf l's cells as (dense cell index << leaf_bits | l), written to out (nullptr: counted only).
+    const auto leaf_cells = [&](int l, uint64_t* out) {
+      uint64_t cell[64];
+      int n = 0;
+      long total = 0;
+      for (int k = l * kLeafFaces; k < std::min(nf, (l + 1) * kLeafFaces); ++k) {
+        const LeafFace& t = tri[size_t(k)];
+        const Eigen::Vector3d lo = t.a.cwiseMin(t.b).cwiseMin(t.c), hi = t.a.cwiseMax(t.b).cwiseMax(t.c);
+        long r[3][2];
+        for (int d = 0; d < 3; ++d) {
+          r[d][0] = long(std::floor((lo[d] - reach_now - pad - origin[d]) / h));
+          r[d][1] = long(std::floor((hi[d] + reach_now + pad - origin[d]) / h));
+        }
+        const Eigen::Vector3d nrm = (t.b - t.a).cross(t.c - t.a).normalized();
+        const bool slab = nrm.allFinite();
+        const double half = (0.5 * h + reach_now) * nrm.cwiseAbs().sum() + 2 * pad;
+        for (long i = r[0][0]; i <= r[0][1]; ++i)
+          for (long j = r[1][0]; j <= r[1][1]; ++j)
+            for (long m = r[2][0]; m <= r[2][1]; ++m) {
+              if (slab) {
+                const Eigen::Vector3d c = origin + h * Eigen::Vector3d(double(i) + 0.5, double(j) + 0.5, double(m) + 0.5);
+                if (std::abs(nrm.dot(c - t.a)) > half) continue;
+              }
+              const uint64_t key = uint64_t((i * dim[1] + j) * dim[2] + m) << leaf_bits | uint64_t(l);
+              if (n < 64) cell[n++] = key;
+              ++total;
+            }
+      }
+      if (total > 64) return -1L;  // one leaf in over 64 cells: the cells are too small
+      std::sort(cell, cell + n);
+      n = int(std::unique(cell, cell + n) - cell);
+      if (out) std::copy(cell, cell + n, out);
+      return long(n);
+    };
+    std::vector<long> first(size_t(leaves) + 1, 0);
+    bool fits = true;
+#pragma omp parallel for schedule(static) reduction(&& : fits) if (leaves > 20000)
+    for (int l = 0; l < leaves; ++l) {
+      const long n = leaf_cells(l, nullptr);
+      fits = fits && n >= 0;
+      first[size_t(l) + 1] = std::max(n, 0L);
+    }
+    for (int l = 0; l < leaves; ++l) first[size_t(l) + 1] += first[size_t(l)];
+    if (!fits || double(first.back()) > kGridEntries * leaves) continue;
+    std::vector<uint64_t> pairs(size_t(first.back())), spare(pairs.size());
+#pragma omp parallel for schedule(static) if (leaves > 20000)
+    for (int l = 0; l < leaves; ++l) leaf_cells(l, pairs.data() + first[size_t(l)]);
+    // Sorted by cell, then leaf (least significant digit first, 16 bits a pass).
+    int bits = leaf_bits;
+    while (bits < 64 && (uint64_t(1) << (bits - leaf_bits)) < uint64_t(dim[0] * dim[1] * dim[2])) ++bits;
+    for (int shift = 0; shift < bits; shift += 16) {
+      std::vector<size_t> start(65537, 0);
+      for (const uint64_t k : pairs) ++start[size_t((k >> shift) & 0xffff) + 1];
+      for (size_t b = 1; b < start.size(); ++b) start[b] += start[b - 1];
+      for (const uint64_t k : pairs) spare[start[size_t((k >> shift) & 0xffff)]++] = k;
+      pairs.swap(spare);
+    }
+    size_t distinct = 0;
+    for (size_t k = 0; k < pairs.size(); ++k) distinct += k == 0 || (pairs[k] >> leaf_bits) != (pairs[k - 1] >> leaf_bits);
+    size_t size = 1024;
+    while (size < 2 * distinct) size *= 2;
+    cells.assign(size, Cell{});
+    cell_leaf.resize(pairs.size());
+    const uint64_t leaf_mask = (uint64_t(1) << leaf_bits) - 1;
+    for (size_t k = 0; k < pairs.size();) {
+      const uint64_t dense = pairs[k] >> leaf_bits;
+      size_t e = k;
+      for (; e < pairs.size() && (pairs[e] >> leaf_bits) == dense; ++e) cell_leaf[e] = int(pairs[e] & leaf_mask);
+      const uint64_t i = dense / uint64_t(dim[1] * dim[2]), j = dense / uint64_t(dim[2]) % uint64_t(dim[1]), m = dense % uint64_t(dim[2]);
+      const uint64_t key = i << 42 | j << 21 | m;
+      size_t at = cell_hash(key) & (size - 1);
+      while (cells[at].key != kNoCell) at = (at + 1) & (size - 1);
+      cells[at] = {key, uint32_t(k), uint32_t(e)};
+      k = e;
+    }
+    grid_lo = origin, grid_h = h, grid_reach = reach_now;
+    return;
+  }
+}
+
 // The local certificates of search(): near leaves from the corner-sharing faces, and each leaf's
 // reach by an exact search from its centre that leaves its near leaves out.
 void SurfaceIndex::Impl::build_certificates() {
@@ -582,6 +751,8 @@ SurfaceIndex::Impl::Hit SurfaceIndex::Impl::search(const Eigen::Vector3d& p, int
   // The leaf bounds subtract n.a and u.corner (|.| <= 2 coordinate_bound) instead of a centre.
   const float leaf_margin = float(kFloatError * (std::abs(p.x()) + std::abs(p.y()) + std::abs(p.z()) + 2 * coordinate_bound));
   const Node4* W = wide.data();
+  const int nf = int(mesh.faces.size());
+  const auto leaf_count = [&](int leaf) { return std::min(kLeafFaces, nf - leaf * kLeafFaces); };
   // The faces of a leaf in the order of their float lower bounds, each tested exactly unless its
   // bound is beyond the best face so far.
   const auto visit_leaf = [&](int first, int count) {
@@ -626,9 +797,53 @@ SurfaceIndex::Impl::Hit SurfaceIndex::Impl::search(const Eigen::Vector3d& p, int
     lines(&tri[size_t(first)], sizeof(LeafFace) * size_t((~child) & 7));
   };
   const bool big = prefetching;
+  // The cell grid: every face within grid_reach of p is in a leaf p's cell lists.
+  // A batch query whose previous answer's leaf has no face plane within twice the reach is taken
+  // to be off the surface (as its predecessor was): it goes straight to the tree.
+  const auto near_planes = [&] {
+    if (hint_leaf < 0) return true;
+    const LeafBound& lb = bounds[size_t(hint_leaf / kLeafFaces)];
+    float nearest = INFINITY;
+    for (int j = 0; j < leaf_count(hint_leaf / kLeafFaces); ++j)
+      nearest = std::min(nearest, std::abs(lb.n[0][j] * x + lb.n[1][j] * y + lb.n[2][j] * z - lb.d[j]));
+    return nearest <= float(2 * grid_reach);
+  };
+  if (excluded_begin == excluded_end && !cells.empty() && near_planes()) {
+    if (const Cell* c = cell_of(p)) {
+      const int* const b = cell_leaf.data() + c->begin;
+      const int* const e = cell_leaf.data() + c->end;
+      prune2 = bound(grid_reach * grid_reach);
+      const int listed = int(e - b);
+      if (listed <= 32) {
+        // The float bounds of all listed faces first, then the faces tested in the order of their
+        // bounds: the one holding p comes first and its distance prunes the rest.
+        alignas(16) float lb[4 * 32];
+        for (int i = 0; i < listed; ++i) {
+          leaf_bound4(bounds[size_t(b[i])], x, y, z, leaf_margin, lb + 4 * i);
+          for (int j = leaf_count(b[i]); j < kLeafFaces; ++j) lb[4 * i + j] = INFINITY;
+        }
+        for (;;) {
+          int at = 0;
+          for (int k = 1; k < 4 * listed; ++k)
+            if (lb[k] < lb[at]) at = k;
+          if (!(lb[at] * float(1 - 4 * kFloatError) <= prune2)) break;
+          lb[at] = INFINITY;  // tested
+          const int k = b[at / 4] * kLeafFaces + at % 4;
+          const LeafFace& T = tri[size_t(k)];
+          const TrianglePoint tp = closest_on_triangle(p, T.a, T.b, T.c);
+          if (closer((tp.point - p).squaredNorm(), T.face, best2, face)) {
+            hit = {k, tp};
+            prune2 = bound(best2);
+          }
+        }
+      } else {
+        for (const int* l = b; l != e; ++l) visit_leaf(*l * kLeafFaces, leaf_count(*l));
+      }
+      if (face >= 0 && std::sqrt(best2) + 2 * slack < grid_reach) return hit;
+      if (face < 0) prune2 = INFINITY;
+    }
+  }
   int hint_link = 0;  // 0 is the root, never a leaf link
-  const int nf = int(mesh.faces.size());
-  const auto leaf_count = [&](int leaf) { return std::min(kLeafFaces, nf - leaf * kLeafFaces); };
   if (hint_leaf >= 0) {
     const int count = leaf_count(hint_leaf / kLeafFaces);
     hint_link = ~(hint_leaf * 8 + count);
@@ -726,6 +941,7 @@ SurfaceIndex::SurfaceIndex(TriMesh mesh) : impl_(std::make_unique<Impl>()) {
     // On big meshes a batch's neighbouring queries are rarely in one leaf's neighbourhood, and the
     // certificates' build (one search per leaf) costs more than they save (measured at 200k vertices).
     if (s.bounds.size() <= kCertificateLeaves) s.build_certificates();
+    s.build_grid();
   }
 }
 
@@ -801,6 +1017,8 @@ std::vector<Footpoint> SurfaceIndex::closest(const std::vector<Eigen::Vector3d>&
         __builtin_prefetch(&out[size_t(ahead)], 1);
         __builtin_prefetch(reinterpret_cast<const char*>(&out[size_t(ahead)]) + sizeof(Footpoint) - 1, 1);
       }
+      if (impl_->prefetching && j + 16 < n) impl_->prefetch_slot(points[size_t(index(j + 16))]);
+      if (impl_->prefetching && j + 8 < n) impl_->prefetch_cell(points[size_t(index(j + 8))]);
       const long i = index(j);
       out[size_t(i)] = closest_from(points[size_t(i)], hint);
     }

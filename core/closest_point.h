@@ -7,7 +7,9 @@
 // Meshes of up to 131k faces also keep a local certificate per leaf (its corner-sharing
 // neighbourhood and a lower bound on the distance to every face outside it): a batch query on or
 // next to the surface, started from the previous answer's leaf, is then settled by a handful of
-// leaves without the descent from the root.
+// leaves without the descent from the root. Every mesh also keeps a hashed grid of cells about a
+// leaf wide, each listing the leaves within a tenth of a cell of it: a query on the surface (or
+// within that tenth) is settled by its cell's few leaves, with no descent, at any mesh size.
 #pragma once
 #include <Eigen/Core>
 #include <array>

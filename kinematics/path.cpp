@@ -6,7 +6,9 @@
 #include <cstring>
 #include <fmt/format.h>
 #include <limits>
+#include <new>
 #include <optional>
+#include <type_traits>
 
 #include "core/errors.h"
 
@@ -111,10 +113,32 @@ Rejection linear_limits(const Machine& m, const Eigen::Vector3d& x) {
   return {};
 }
 
-// singularity_angle_deg(m, axis) < singular_deg, compared as cosines.
-bool near_singular(const Machine& m, const Eigen::Vector3d& axis, double singular_deg) {
-  return singularity_cosine(m, axis) > std::cos(singular_deg * kDeg);
+// singularity_angle_deg(m, axis) < singular_deg, compared as cosines (cos_singular: its cosine).
+bool near_singular(const Machine& m, const Eigen::Vector3d& axis, double cos_singular) {
+  return singularity_cosine(m, axis) > cos_singular;
 }
+
+// n value-initialised T per pose, their pages first touched on all threads (in the static schedule
+// of the loops that fill them): std::vector's value-initialisation faults them in on one thread,
+// about 90 MB for 200,000 poses, and the busiest thread's time is what two cores give.
+template <class T>
+class PoseArray {
+ public:
+  explicit PoseArray(size_t n) : p_(static_cast<T*>(::operator new(std::max<size_t>(n, 1) * sizeof(T), kAlign))) {
+    static_assert(std::is_trivially_destructible_v<T>, "no destructor is run");
+#pragma omp parallel for schedule(static)
+    for (long i = 0; i < long(n); ++i) new (p_ + i) T();
+  }
+  ~PoseArray() { ::operator delete(p_, kAlign); }
+  PoseArray(const PoseArray&) = delete;
+  PoseArray& operator=(const PoseArray&) = delete;
+  T& operator[](size_t i) { return p_[i]; }
+  const T& operator[](size_t i) const { return p_[i]; }
+
+ private:
+  static constexpr std::align_val_t kAlign{alignof(T) > 64 ? alignof(T) : 64};
+  T* p_;
+};
 
 
 }  // namespace
@@ -162,11 +186,12 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   if (n == 0) return out;
 
   // Candidates per pose within the rotary limits (any turn), independent of the predecessor.
-  std::vector<Two<Candidate>> cand(static_cast<size_t>(n));
-  std::vector<Two<Rejection>> cand_linear(static_cast<size_t>(n));  // per candidate when linear_ok == 0
+  const double cos_singular = std::cos(o.singular_deg * kDeg);
+  PoseArray<Two<Candidate>> cand(static_cast<size_t>(n));
+  PoseArray<Two<Rejection>> cand_linear(static_cast<size_t>(n));  // per candidate when linear_ok == 0
   // Cosines and sines of each candidate's angles when linear_ok >= 0 (apart: the serial Viterbi
   // pass below streams through `cand`, which stays small).
-  std::vector<std::array<Trig, 2>> cand_trig(static_cast<size_t>(n));
+  PoseArray<std::array<Trig, 2>> cand_trig(static_cast<size_t>(n));
   std::vector<char> singular(static_cast<size_t>(n), 0);
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
@@ -183,7 +208,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
       }
       cand[i].push_back(c);
     }
-    if (near_singular(m, poses[i].axis, o.singular_deg)) singular[i] = 1;
+    if (near_singular(m, poses[i].axis, cos_singular)) singular[i] = 1;
   }
   for (int i = 0; i < n; ++i) {
     if (cand[i].empty()) {
@@ -200,7 +225,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     std::array<double, 2> deg{0, 0};
     int from = -1;
   };
-  std::vector<Two<State>> st(static_cast<size_t>(n));
+  PoseArray<Two<State>> st(static_cast<size_t>(n));
   Rejection why;  // the last rejection met (worded only if the path fails)
   for (int i = 0; i < n; ++i) {
     st[i].assign(cand[i].size(), State{});
@@ -280,7 +305,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
       best = st[i][best].from;
     }
   }
-  std::vector<Joints> q(static_cast<size_t>(n));
+  PoseArray<Joints> q(static_cast<size_t>(n));
   std::vector<char> free_angle(static_cast<size_t>(n));  // bit k: angle k is free at the chosen candidate
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
@@ -311,7 +336,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
       i = j;
     }
   }
-  std::vector<Trig> trig(static_cast<size_t>(n));
+  PoseArray<Trig> trig(static_cast<size_t>(n));
 #pragma omp parallel for schedule(static)
   for (int i = 0; i < n; ++i) {
     // The candidate's linear joints when the chosen angles are its own, bit for bit (no turn added).
@@ -447,7 +472,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
       out.t[j] = nd.t;
       out.joints[j] = nd.q;
       out.input_index[j] = -1;
-      singular_out[j] = near_singular(m, nd.pose.axis, o.singular_deg);
+      singular_out[j] = near_singular(m, nd.pose.axis, cos_singular);
       ++j;
     }
     out.poses[j] = poses[size_t(i)];

@@ -5,6 +5,7 @@
 
 #include <cmath>
 #include <limits>
+#include <numeric>
 #include <random>
 
 #include "core/envelope.h"
@@ -321,4 +322,129 @@ TEST_CASE("the batch call equals brute force where faces that share no corner ar
   // corner with the face the query was made on.
   CHECK(upper > 300);
   CHECK(lower > 300);
+}
+
+namespace {
+// Footpoints of the batch call on 1 and on 2 threads that differ from brute force in any bit
+// (face, point, distance, normal, boundary flag).
+int batch_differences(const SurfaceIndex& index, const std::vector<Eigen::Vector3d>& queries) {
+  const int threads = omp_get_max_threads();
+  omp_set_num_threads(1);
+  const auto one = index.closest(queries);
+  omp_set_num_threads(2);
+  const auto two = index.closest(queries);
+  omp_set_num_threads(threads);
+  std::vector<int> differ(queries.size(), 0);
+#pragma omp parallel for schedule(dynamic, 16)
+  for (long i = 0; i < long(queries.size()); ++i) {
+    const Footpoint slow = index.closest_brute_force(queries[size_t(i)]);
+    for (const Footpoint* fast : {&one[size_t(i)], &two[size_t(i)]})
+      if (fast->face != slow.face || fast->distance != slow.distance || fast->point != slow.point ||
+          fast->normal != slow.normal || fast->on_boundary != slow.on_boundary)
+        differ[size_t(i)] = 1;
+  }
+  return std::accumulate(differ.begin(), differ.end(), 0);
+}
+
+// Two wavy sheets `gap` apart (edges of 1, the second shifted in the plane), as in the test above.
+TriMesh two_sheets(double gap) {
+  TriMesh mesh;
+  const int nx = 40, ny = 30;
+  for (int sheet = 0; sheet < 2; ++sheet) {
+    const int base = int(mesh.vertices.size());
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        const double x = i + 0.37 * sheet, y = j + 0.21 * sheet;
+        mesh.vertices.emplace_back(x, y, gap * sheet + 0.05 * std::sin(0.7 * x) * std::cos(0.4 * y));
+      }
+    for (int j = 0; j + 1 < ny; ++j)
+      for (int i = 0; i + 1 < nx; ++i) {
+        const int v = base + j * nx + i;
+        mesh.faces.push_back({v, v + 1, v + nx + 1});
+        mesh.faces.push_back({v, v + nx + 1, v + nx});
+      }
+  }
+  return mesh;
+}
+}  // namespace
+
+TEST_CASE("the cell grid answers as brute force on a 160k-face envelope: on the surface, at vertices and edges, and around its reach") {
+  // Over 131k faces: no local certificates, so every query on or next to the surface is settled by
+  // its cell (reach: a tenth of a leaf's width, here about 5e-4) or by the tree after it.
+  const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), 200, 400, 1);
+  const TriMesh mesh = transformed(g.mesh, unit_diagonal_frame(g.mesh));
+  REQUIRE(mesh.faces.size() > 140000);
+  const SurfaceIndex index(mesh);
+  std::vector<Eigen::Vector3d> queries = offset_points(mesh, 0.0, 400, 3);
+  for (double offset : {1e-9, 1e-4, 3e-4, 5e-4, 7e-4, 1e-3, 3e-3}) {
+    const auto more = offset_points(mesh, offset, 60, 4);
+    queries.insert(queries.end(), more.begin(), more.end());
+  }
+  // Ties: corners shared by up to six faces and edges shared by two (the lowest index wins).
+  for (size_t f = 0; f < mesh.faces.size(); f += 1201) {
+    const auto& F = mesh.faces[f];
+    queries.push_back(mesh.vertices[size_t(F[0])]);
+    queries.push_back(0.5 * (mesh.vertices[size_t(F[1])] + mesh.vertices[size_t(F[2])]));
+  }
+  CHECK(batch_differences(index, queries) == 0);
+  // Single queries take the grid too (no previous answer).
+  check_matches_brute_force(index, std::vector<Eigen::Vector3d>(queries.begin(), queries.begin() + 100));
+}
+
+TEST_CASE("the cell grid answers as brute force where two sheets are closer than its reach") {
+  // Sheets 0.02 apart with edges of 1 (the grid's reach is about 0.15): a cell lists leaves of both
+  // sheets, and a query on one sheet may be nearest to the other.
+  const TriMesh mesh = two_sheets(0.02);
+  const SurfaceIndex index(mesh);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(0, 1);
+  std::vector<Eigen::Vector3d> queries = offset_points(mesh, 0.0, 3000, 8);
+  for (auto q : offset_points(mesh, 0.0, 1000, 10)) queries.push_back(q + Eigen::Vector3d(0, 0, 0.03 * u(rng) - 0.005));
+  for (size_t v = 0; v < mesh.vertices.size(); v += 3) queries.push_back(mesh.vertices[v]);
+  int other_sheet = 0;
+  const int faces_per_sheet = int(mesh.faces.size()) / 2;
+  for (size_t i = 3000; i < 4000; ++i) other_sheet += index.closest_brute_force(queries[i]).face >= faces_per_sheet;
+  CHECK(other_sheet > 100);
+  CHECK(batch_differences(index, queries) == 0);
+}
+
+TEST_CASE("closest points equal brute force on a mesh of tiny faces and a few huge ones (coarsened or no cell grid)") {
+  // A 60 x 60 grid of 0.01-wide faces under three triangles 100 wide: the huge faces would fill
+  // thousands of cells the size of a tiny leaf, so the grid is coarsened or left out; either way
+  // the answers are brute force's.
+  TriMesh mesh = test::wavy_grid(60, 60, 0.6, 0.6, 0.002);
+  const int base = int(mesh.vertices.size());
+  for (int k = 0; k < 3; ++k) {
+    const double z = 0.05 + 0.1 * k;
+    mesh.vertices.emplace_back(-50, -50, z);
+    mesh.vertices.emplace_back(50, -50, z + 0.01);
+    mesh.vertices.emplace_back(0, 50, z);
+    mesh.faces.push_back({base + 3 * k, base + 3 * k + 1, base + 3 * k + 2});
+  }
+  const SurfaceIndex index(mesh);
+  std::vector<Eigen::Vector3d> queries = offset_points(mesh, 0.0, 1500, 12);
+  for (const auto& q : random_points(mesh, 1.0, 500, 13)) queries.push_back(q);
+  CHECK(batch_differences(index, queries) == 0);
+}
+
+TEST_CASE("the cell grid answers as brute force just inside and just beyond its reach on a 26k-face envelope") {
+  // The reach is a tenth of a leaf's width (here about 5e-4): a query that far off the surface is
+  // settled by its cell only if the cell lists every face that near, which the widening of each
+  // face's box and plane by the reach ensures (without it, about one query in 400 here is wrong).
+  const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), 66, 200, 1);
+  const TriMesh mesh = transformed(g.mesh, unit_diagonal_frame(g.mesh));
+  const SurfaceIndex index(mesh);
+  std::vector<Eigen::Vector3d> queries;
+  for (double offset : {1e-4, 2e-4, 3e-4, 5e-4, 7e-4}) {
+    const auto more = offset_points(mesh, offset, 1000, 17);
+    queries.insert(queries.end(), more.begin(), more.end());
+  }
+  CHECK(batch_differences(index, queries) == 0);
+  int differ = 0;
+#pragma omp parallel for schedule(dynamic, 16) reduction(+ : differ)
+  for (long i = 0; i < long(queries.size()); ++i) {
+    const Footpoint fast = index.closest(queries[size_t(i)]), slow = index.closest_brute_force(queries[size_t(i)]);
+    differ += fast.face != slow.face || fast.distance != slow.distance || fast.point != slow.point;
+  }
+  CHECK(differ == 0);
 }
