@@ -39,6 +39,10 @@ std::string CoverOptions::validate() const {
   if (oriented_explored > 0 && oriented_lines < 1) return "cover.oriented_lines: at least 1 when oriented seeds are explored";
   if (!(band >= 0) || !std::isfinite(band)) return "cover.band: must be >= 0";
   if (lines < 2) return "cover.lines: at least 2";
+  if (spares < 0) return "cover.spares: must be >= 0";
+  if (patch.fit.fixed_tool && !(tool_length > 0 && std::isfinite(tool_length)))
+    return "tool_length: must be positive with a fixed tool";
+  if (up && !(up->norm() > 0 && up->allFinite())) return "up: must be a nonzero direction";
   if (!(patch.tolerance > 0)) return "tolerance: must be positive";
   if (auto e = patch.fit.validate(); !e.empty()) return e;
   if (auto e = patch.exploration.validate(); !e.empty()) return "exploration." + e;
@@ -402,6 +406,7 @@ std::vector<int> seed_points(const SurfaceIndex& surface, const std::vector<char
 struct Candidate {
   LineTrajectory trajectory;
   double uncovered_swept = 0;  // share of Φ's area, uncovered, under the kept trajectory
+  int seed_vertex = -1;        // the seed point it came from
 };
 
 // Keeps the run of the trajectory that sweeps uncovered surface around the seed position, plus
@@ -462,15 +467,47 @@ struct Fitted {
   bool ok = false;
 };
 
+// A held tool's start (fixed or shared tool): the candidate's rails with the tool's axis length,
+// centred on the candidate's line (which reaches across Φ), its holder end along `up` (or, without
+// one, the way round whose initial error is lower: a tool's ends are not interchangeable).
+Rails held_tool_start(const SurfaceIndex& surface, const Rails& r, const CoverOptions& o) {
+  const double L = o.tool_length;
+  Rails c = r;
+  c.length = L;
+  for (Eigen::Index k = 0; k < r.a.ctrl.rows(); ++k) {
+    const Eigen::RowVector3d a = r.a.ctrl.row(k), b = r.b.ctrl.row(k);
+    const Eigen::RowVector3d mid = 0.5 * (a + b), e = (b - a).normalized();
+    c.a.ctrl.row(k) = mid - 0.5 * L * e;
+    c.b.ctrl.row(k) = mid + 0.5 * L * e;
+  }
+  Rails turned = c;
+  std::swap(turned.a, turned.b);
+  if (o.up) return mean_axis(c).dot(*o.up) >= 0 ? c : turned;
+  const auto error = [&](const Rails& x) {
+    try {
+      return sample_error(surface, x, *o.patch.fit.fixed_tool, o.patch.fit).max;
+    } catch (const InputError&) {
+      return std::numeric_limits<double>::infinity();
+    }
+  };
+  return error(turned) < error(c) ? turned : c;
+}
+
+// One candidate fitted, machined and trimmed where it gouges; its gain is the uncovered area it
+// brings within tolerance. From the trajectory, or from `start` (rails of an earlier fit).
 Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, const std::vector<char>& covered,
-                     const std::vector<double>& area, const CoverOptions& o) {
+                     const std::vector<double>& area, const CoverOptions& o, const Rails* start = nullptr) {
   Fitted out;
   PatchOptions po = o.patch;
   po.trim_gouges = true;  // neighbours must not overcut each other's region
-  if (tr.a.size() < size_t(po.fit.rail_control_points)) return out;
+  // A held tool keeps its tip at the a end: the part must not turn it round (that would be the
+  // mirrored tool), the start has its holder end along `up` already.
+  if (po.fit.fixed_tool) po.orient_by_part = false;
+  if (!start && tr.a.size() < size_t(po.fit.rail_control_points)) return out;
   try {
     out.fit.trajectory = tr;
-    out.fit.initial = rails_from_trajectory(tr, po.fit);
+    out.fit.initial = start ? *start : rails_from_trajectory(tr, po.fit);
+    if (po.fit.fixed_tool) out.fit.initial = held_tool_start(surface, out.fit.initial, o);
     out.fit.fit = optimize_motion(surface, out.fit.initial, po.fit);
   } catch (const InputError&) {
     return out;  // the motion left the surface: not a patch
@@ -486,11 +523,24 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   return out;
 }
 
+// The share of Φ's area a fit brings within tolerance that is not covered yet.
+double gain_of(const PatchFit& f, const std::vector<char>& covered, const std::vector<double>& area, double tol) {
+  double g = 0;
+  for (size_t v = 0; v < area.size(); ++v) {
+    const double d = f.machined.design_deviation[v];
+    if (!covered[v] && std::isfinite(d) && std::abs(d) <= tol) g += area[v];
+  }
+  return g;
+}
+
 }  // namespace
 
-Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
+Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& options,
                          const std::function<void(const CoverProgress&)>& on_progress) {
-  if (auto err = o.validate(); !err.empty()) throw InputError(err);
+  if (auto err = options.validate(); !err.empty()) throw InputError(err);
+  // The options of the search; a shared tool is held in them once the first patch has fitted it.
+  CoverOptions o = options;
+  const bool sharing = o.shared_tool && !o.patch.fit.fixed_tool;  // a fixed tool is one tool already
   const TriMesh& m = surface.mesh();
   const size_t nv = m.vertices.size();
   const std::vector<double> area = vertex_areas(m);
@@ -528,7 +578,11 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
   };
   update_union();
   out.stop = CoverStop::NoProgress;
+  out.shared_tool = o.shared_tool || o.patch.fit.fixed_tool.has_value();
   int failures = 0;
+  // Fitted candidates not chosen (spares), and, right after a shared tool has been fixed, those
+  // fitted with their own tools, to be refitted with it (restarts).
+  std::vector<Fitted> pool, restarts;
   while (true) {
     if (out.coverage >= o.coverage) {
       out.stop = CoverStop::Coverage;
@@ -538,9 +592,38 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
       out.stop = CoverStop::MaxPatches;
       break;
     }
+    Fitted best;
+    // Fits made in earlier rounds first: their gain on what is still uncovered. The best spare is
+    // this round's first candidate; when it reaches the target, no search is needed.
+    const auto offer = [&](Fitted f) {
+      if (!f.ok) return;
+      if (f.gain > best.gain) std::swap(f, best);
+      if (f.ok) pool.push_back(std::move(f));
+    };
+    {
+      std::vector<Fitted> earlier = std::move(pool);
+      pool.clear();
+      for (Fitted& f : earlier) {
+        f.gain = gain_of(f.fit, covered, area, tol);
+        offer(std::move(f));
+      }
+      // A shared tool just fixed: the best of the other first-round fits refitted with it (motion only,
+      // from their fitted motions).
+      for (Fitted& f : restarts) f.gain = gain_of(f.fit, covered, area, tol);
+      std::stable_sort(restarts.begin(), restarts.end(), [](const Fitted& x, const Fitted& y) { return x.gain > y.gain; });
+      for (size_t r = 0; r < restarts.size() && int(r) < o.fitted_seeds; ++r) {
+        if (restarts[r].gain < 0.005) break;
+        report("refitting spare " + std::to_string(r + 1) + " with the shared tool");
+        const Rails start = restarts[r].fit.fit.rails;
+        offer(fit_candidate(surface, restarts[r].fit.trajectory.value_or(LineTrajectory{}), covered, area, o, &start));
+        ++out.seeds_tried;
+      }
+      restarts.clear();
+    }
+    const bool enough = best.ok && out.coverage + best.gain >= o.coverage;
     std::vector<char> blocked = covered;
     for (size_t v = 0; v < nv; ++v) blocked[v] |= tried[v];
-    const std::vector<int> points = seed_points(surface, blocked, o);
+    const std::vector<int> points = enough ? std::vector<int>{} : seed_points(surface, blocked, o);
     progress.seeds = int(points.size());
     progress.seed = 0;
     report("seeding");
@@ -593,7 +676,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
       }
       for (size_t r = 0; r < turns.size(); ++r) {
         const Seed& s = turns[r];
-        tried[size_t(s.vertex)] = 1;
         progress.seed = int(r) + 1;
         progress.seeds = int(turns.size());
         report(oriented ? "exploring and propagating oriented seeds" : "exploring and propagating");
@@ -601,7 +683,13 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
         const ExploredLine ex = explore_line(surface, s.line.a, s.line.b, o.patch.exploration);
         const LineTrajectory tr = propagate_line(surface, ex.a, ex.b, o.patch.propagation);
         Candidate c = keep_uncovered(surface, tr, ex.a, covered, area, o);
-        if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) continue;
+        c.seed_vertex = s.vertex;
+        // A seed is used up when its candidate is fitted or cannot be; one explored but not fitted
+        // (others swept more uncovered area, on another flank perhaps) is seeded again next round.
+        if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) {
+          tried[size_t(s.vertex)] = 1;
+          continue;
+        }
         candidates.push_back(std::move(c));
       }
       // The candidates sweeping the most uncovered area first.
@@ -609,13 +697,13 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
                        [](const Candidate& x, const Candidate& y) { return x.uncovered_swept > y.uncovered_swept; });
       return candidates;
     };
-    Fitted best;
     const auto fit_best = [&](const std::vector<Candidate>& candidates, int count) {
       for (size_t r = 0; r < candidates.size() && int(r) < count; ++r) {
         // Enough already.
         if (best.ok && out.coverage + best.gain >= o.coverage) break;
         report("fitting candidate " + std::to_string(r + 1));
         const LineTrajectory& tr = candidates[r].trajectory;
+        tried[size_t(candidates[r].seed_vertex)] = 1;
         Fitted f = fit_candidate(surface, tr, covered, area, o);
         ++out.seeds_tried;
         // A sweep too long for one envelope within tolerance (it gouges all along, or brings little):
@@ -634,7 +722,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
             ++out.seeds_tried;
             if (h.ok && (!f.ok || h.gain > f.gain)) f = std::move(h);
           }
-        if (f.ok && f.gain > best.gain) best = std::move(f);
+        offer(std::move(f));
       }
     };
     fit_best(candidates_of(false), o.fitted_seeds);
@@ -642,7 +730,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
     // have likely missed the tool axis's direction (general tools) and the oriented ones are tried as
     // well. Not always: a larger first patch is not a better cover (greedy), and the seeded lines
     // serve conical and cylindrical tools well.
-    if (o.oriented_explored > 0 && !(best.ok && best.gain >= o.orient_below * (1 - out.coverage))) {
+    if (!enough && o.oriented_explored > 0 && !(best.ok && best.gain >= o.orient_below * (1 - out.coverage))) {
       report("orienting seed lines");
 #pragma omp parallel for schedule(dynamic, 1)
       for (int k = 0; k < int(at_point.size()); ++k) orient_seeds(surface, at_point[size_t(k)], o);
@@ -659,6 +747,73 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& o,
     gains.push_back(best.gain);
     update_union();
     report("patch accepted");
+    // The most promising spares only (a machined surface each).
+    for (Fitted& f : pool) f.gain = gain_of(f.fit, covered, area, tol);
+    std::stable_sort(pool.begin(), pool.end(), [](const Fitted& x, const Fitted& y) { return x.gain > y.gain; });
+    while (!pool.empty() && (int(pool.size()) > o.spares || pool.back().gain < 0.005)) pool.pop_back();
+    if (sharing && fits.size() == 1) {
+      // The shared tool: the first patch's, turned to stand with its holder end along `up` (with a
+      // check surface the part has chosen that end already). Held from now on; the seeds are placed
+      // at its radii; the other first-round fits are refitted with it.
+      PatchFit& first = fits.front();
+      if (o.up && !o.patch.fit.check.part && mean_axis(first.fit.rails).dot(*o.up) < 0) first = reversed(std::move(first));
+      o.patch.fit.fixed_tool = first.fit.tool;
+      o.tool_length = first.fit.rails.length;
+      o.radii.clear();
+      for (double s : {0.25, 0.5, 0.75}) o.radii.push_back(first.fit.tool.d(s));
+      std::sort(o.radii.begin(), o.radii.end());
+      o.radii.erase(std::unique(o.radii.begin(), o.radii.end(), [](double x, double y) { return std::abs(x - y) < 1e-3; }),
+                    o.radii.end());
+      restarts = std::move(pool);
+      pool.clear();
+    }
+  }
+  out.coverage_held_tool = out.coverage;
+  if (sharing && fits.size() > 1) {
+    // One joint refit of every patch with one tool (eq. 12 summed over the patches, the radii free
+    // again, from the held tool and the fitted motions), kept when the union's coverage does not
+    // drop and no patch gouges after trimming.
+    report("refitting all patches jointly with one tool");
+    PatchOptions po = o.patch;
+    po.fit.fixed_tool.reset();
+    po.trim_gouges = true;
+    po.orient_by_part = false;
+    std::vector<FitResult> joint;
+    for (const PatchFit& f : fits) joint.push_back(f.fit);
+    std::vector<PatchFit> refit;
+    try {
+      joint = fit_shared_tool(std::vector<const SurfaceIndex*>(fits.size(), &surface), std::move(joint), o.tool_length, po.fit);
+      for (size_t k = 0; k < fits.size(); ++k) {
+        PatchFit f = fits[k];
+        f.fit = std::move(joint[k]);
+        f.tip_shortened = 0;
+        f = po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
+        if (f.gouges || f.check_refused || f.check_intrusion > 0) break;
+        refit.push_back(std::move(f));
+      }
+    } catch (const InputError&) {
+      refit.clear();  // a motion left the surface: the held tool's patches stay
+    }
+    if (refit.size() == fits.size()) {
+      std::vector<const MachinedSurface*> ms;
+      for (const PatchFit& f : refit) ms.push_back(&f.machined);
+      const UnionDeviation u = union_deviation(ms, nv);
+      if (coverage(m, u.deviation, tol) >= out.coverage) {
+        fits = std::move(refit);
+        update_union();
+        out.joint_refit = true;
+        // What each patch brings first, in the order they were found.
+        std::fill(covered.begin(), covered.end(), 0);
+        for (size_t k = 0; k < fits.size(); ++k) {
+          gains[k] = gain_of(fits[k], covered, area, tol);
+          for (size_t v = 0; v < nv; ++v) {
+            const double d = fits[k].machined.design_deviation[v];
+            covered[v] |= std::isfinite(d) && std::abs(d) <= tol;
+          }
+        }
+      }
+    }
+    report(out.joint_refit ? "joint refit kept" : "joint refit not kept (the held tool covers more)");
   }
 
   // Machining order: along Φ's longest extent (principal axis of the vertices).

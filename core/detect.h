@@ -3,7 +3,9 @@
 // propagated (Sec. 4.3) and optimised (Sec. 4.5), chosen greedily by the area their machined
 // surface brings within tolerance that no earlier patch covers. Unit-diagonal frame throughout.
 #pragma once
+#include <Eigen/Core>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -36,7 +38,24 @@ struct CoverOptions {
   int fitted_seeds = 3;    // of those, this many are fitted (in turn, among those sweeping the most uncovered area)
   double band = 0.03;      // overlap into covered area a new patch's trajectory keeps (unit frame, arc length)
   int lines = 8;           // axis lines written per patch (init: lines) to reproduce it
+  // Candidates fitted in a round but not chosen are kept (at most this many, by their gain on the
+  // uncovered area): the next round starts from the best of them (a flank of its own, seeded and
+  // fitted while another won, is not searched for again).
+  int spares = 8;
   PatchOptions patch;      // fit, exploration, propagation, machined surface, tolerance
+  // Tool policy (issue 14). Default: one custom tool per patch, fitted with it.
+  // patch.fit.fixed_tool set (a catalogue tool): every candidate's motion is fitted to that tool,
+  // whose axis is `tool_length` long (motion only, the paper's fit without d as unknowns).
+  // shared_tool: one custom tool for every patch (one tool to grind, one tool change): the first
+  // patch is fitted as usual and its tool is then held for every later candidate (motion only), so
+  // every patch is one that tool can cut; at the end all patches are refitted jointly
+  // (fit_shared_tool from their motions), kept when the union's coverage does not drop.
+  bool shared_tool = false;
+  double tool_length = 0;  // unit frame; with patch.fit.fixed_tool
+  // With a held tool (fixed or shared) its ends are not interchangeable: candidates start with the
+  // b end (holder) along `up` (the machine's spindle side), and the first shared patch is turned so.
+  // Unset: the start whose initial error is lower. A check surface's own up takes precedence.
+  std::optional<Eigen::Vector3d> up;
   std::string validate() const;  // empty when valid, else names the field
 };
 
@@ -64,6 +83,11 @@ struct Detection {
   double overcut = 0;                   // worst overcut of the union (>= 0, unit frame)
   CoverStop stop = CoverStop::NoProgress;
   int seeds_tried = 0;                  // trajectories fitted
+  // shared_tool: every patch has the same tool (same radii, tip at the a end). The union's coverage
+  // with the first patch's tool held, and whether the joint refit replaced it (coverage not lower).
+  bool shared_tool = false;
+  double coverage_held_tool = 0;
+  bool joint_refit = false;
 };
 
 // `patches: auto` of a job: one call. Throws InputError for invalid options; a surface on which no

@@ -260,7 +260,9 @@ void share_tool(const Job& job, const std::vector<const SurfaceIndex*>& targets,
 
 // `patches: auto`: detect_patches over the whole surface with the job's fit options; the detected
 // patches become init: lines jobs (all of them before any pointer is taken) and keep their fits.
-void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit, FittedJob& out, const Progress& progress) {
+// With a catalogue tool `fit.fixed_tool` is it and `tool_length` its axis length (unit frame).
+void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit, double tool_length, FittedJob& out,
+                const Progress& progress) {
   CoverOptions co;
   co.coverage = job.cover->coverage;
   co.max_patches = job.cover->max_patches;
@@ -285,16 +287,27 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
     radii.erase(std::unique(radii.begin(), radii.end()), radii.end());
     if (!radii.empty()) co.radii = radii;
   }
+  // Tool policy: tool: {shared: true} one tool for every patch (detect_patches holds the first
+  // patch's tool for the others, then refits them jointly); a catalogue tool is held throughout,
+  // its seeds at its own radii. Held tools stand with the holder up in the work frame.
+  const Eigen::Vector3d up_part = setup_rotation(job.post).transpose() * Eigen::Vector3d::UnitZ();
+  co.shared_tool = job.tool.shared;
+  co.up = up_part;
+  if (fit.fixed_tool) {
+    co.tool_length = tool_length;
+    co.radii.clear();
+    for (double s : {0.25, 0.5, 0.75}) co.radii.push_back(fit.fixed_tool->d(s));
+  }
   Detection d = detect_patches(index, co, [&](const CoverProgress& c) {
     progress(fmt::format("detect: {}: seed {} of {}, {} patches, coverage {:.1f}%", c.stage, c.seed, c.seeds, c.patches,
                          100 * c.coverage));
   });
   // Detection does not know the machine: without a part, every patch is turned so that its tool
   // stands with the tip down and the holder up in the work frame (the setup applied), as a spindle
-  // holds it (with a part, with_check has put the tip at a already).
-  const Eigen::Vector3d up_part = setup_rotation(job.post).transpose() * Eigen::Vector3d::UnitZ();
+  // holds it (with a part, with_check has put the tip at a already). Not a held tool (shared or
+  // catalogue): turned round it would be its mirror image; detection started it holder up.
   for (DetectedPatch& dp : d.patches) {
-    if (fit.check.part || mean_axis(dp.fit.fit.rails).dot(up_part) >= 0) continue;
+    if (fit.check.part || d.shared_tool || mean_axis(dp.fit.fit.rails).dot(up_part) >= 0) continue;
     dp.fit = reversed(std::move(dp.fit));
     for (AxisLine& l : dp.spec.lines) std::swap(l.a, l.b);
   }
@@ -326,6 +339,12 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   c.overcut_mm = out.frame.length_to_mm(d.overcut);
   c.stop = to_string(d.stop);
   c.seeds_tried = d.seeds_tried;
+  c.one_tool = d.shared_tool;
+  c.coverage_held_tool = d.coverage_held_tool;
+  c.joint_refit = d.joint_refit;
+  if (job.tool.shared && !job.tool.catalogue && d.patches.size() > 1)
+    progress(fmt::format("shared tool: {:.1f}% with the first patch's tool held, joint refit of all patches {}",
+                         100 * d.coverage_held_tool, d.joint_refit ? "kept" : "not kept (it covered less)"));
   out.cover = std::move(c);
   progress(cover_summary(job, out));
 }
@@ -430,7 +449,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     return o;
   };
   if (job.cover) {
-    detect_job(job, index, fit_options(), out, progress);
+    detect_job(job, index, fit_options(), catalogue ? catalogue->second : 0.0, out, progress);
     check_job(job, out, progress);
     return out;
   }
@@ -740,9 +759,24 @@ std::string tool_label(const Job& job, const FittedPatch& p) {
 
 std::string cover_summary(const Job& job, const FittedJob& f) {
   if (!f.cover) return {};
-  return fmt::format("whole surface: {} patches, {:.1f}% within {} mm (stopped: {})", f.patches.size(),
+  return fmt::format("whole surface: {} patches{}, {:.1f}% within {} mm (stopped: {})", f.patches.size(),
+                     job.tool.catalogue ? ", one catalogue tool" : job.tool.shared ? ", one shared tool" : "",
                      100 * f.cover->coverage, job.tolerance_mm, f.cover->stop);
 }
+
+namespace {
+// The cover's tool policy: one custom tool per patch, one shared tool, or one catalogue tool.
+nlohmann::ordered_json tool_policy_report(const Job& job, const CoverResult& c) {
+  if (job.tool.catalogue)
+    return {{"policy", "catalogue"}, {"name", job.tool.catalogue->name}, {"tools", 1},
+            {"note", "the catalogue tool held for every detected patch, only the motions fitted"}};
+  if (!job.tool.shared) return {{"policy", "per patch"}, {"note", "one custom tool fitted with each patch"}};
+  return {{"policy", "shared"}, {"tools", 1}, {"coverage_first_tool_held", c.coverage_held_tool},
+          {"joint_refit_kept", c.joint_refit},
+          {"note", "one custom tool for every patch: the first patch's tool held while the others were detected, then all "
+                   "patches refitted jointly with one tool (kept when the union's coverage did not drop)"}};
+}
+}  // namespace
 
 nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
   const CoverResult& c = *f.cover;
@@ -759,6 +793,7 @@ nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
           {"overcut_mm", round_mm(c.overcut_mm)},
           {"vertices_not_reached", uncut},
           {"trajectories_fitted", c.seeds_tried},
+          {"tool", tool_policy_report(job, c)},
           {"detected_job", detected_job_name}};
 }
 

@@ -56,6 +56,11 @@ struct CoverResult {
   double overcut_mm = 0;              // worst overcut of the union (>= 0)
   std::string stop;                   // coverage reached, max patches, no progress
   int seeds_tried = 0;
+  // tool: {shared: true} (or a catalogue tool): one tool for every patch. Shared: the coverage with
+  // the first patch's tool held for the others, and whether the joint refit of all patches was kept.
+  bool one_tool = false;
+  double coverage_held_tool = 0;
+  bool joint_refit = false;
 };
 
 struct FittedJob {
@@ -75,7 +80,7 @@ struct FittedJob {
   std::optional<CoverResult> cover;
 };
 
-// "whole surface: N patches, C% within T mm (stopped: REASON)"; empty without `patches: auto`.
+// "whole surface: N patches[, one shared tool], C% within T mm (stopped: REASON)"; empty without `patches: auto`.
 [[nodiscard]] std::string cover_summary(const Job& job, const FittedJob& fitted);
 // The patch's tool as tables name it: the catalogue name, or the fitted shape ("general",
 // "cone", ...; "shared" added when one tool serves every patch).

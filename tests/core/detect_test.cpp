@@ -3,6 +3,7 @@
 #include <doctest/doctest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 
 #include "core/envelope.h"
@@ -230,4 +231,79 @@ TEST_CASE("propagation from a line off the true axis runs to the surface boundar
     CHECK(std::min(t0, t1) < 0.05);
     CHECK(std::max(t0, t1) > 0.95);
   }
+}
+
+namespace {
+// Two separate flanks 25 mm apart, each the exact envelope of the same barrel tool: `first` and
+// `second` motions, the second turned half round about z (a neighbouring blade's flank faces the
+// other way) and moved beside the first. Unit frame of both.
+struct TwoFlanks {
+  TriMesh unit_mesh;
+  int first_vertices = 0;  // vertices [0, first_vertices) are the first flank's
+  Similarity frame;
+};
+TwoFlanks two_flanks(const char* first, const char* second, int n_s, int n_t) {
+  const RadiusProfile barrel = barrel_profile(6, 1.5);
+  AnalyticMotionOptions m1, m2;
+  m1.kind = first;
+  m2.kind = second;
+  const EnvelopeGrid g1 = envelope_grid(analytic_motion(m1), barrel, n_s, n_t, 1);
+  EnvelopeGrid g2 = envelope_grid(analytic_motion(m2), barrel, n_s, n_t, 1);
+  const Eigen::Matrix3d half_turn = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  for (auto& v : g2.mesh.vertices) v = half_turn * v;
+  const BoundingBox b1 = bounding_box(g1.mesh.vertices), b2 = bounding_box(g2.mesh.vertices);
+  const Eigen::Vector3d shift(b1.min.x() - b2.min.x(), b1.max.y() - b2.min.y() + 25, 0);
+  for (auto& v : g2.mesh.vertices) v += shift;
+  TwoFlanks out;
+  TriMesh both = g1.mesh;
+  out.first_vertices = int(both.vertices.size());
+  for (const auto& v : g2.mesh.vertices) both.vertices.push_back(v);
+  for (auto f : g2.mesh.faces) both.faces.push_back({f[0] + out.first_vertices, f[1] + out.first_vertices, f[2] + out.first_vertices});
+  out.frame = unit_diagonal_frame(both);
+  out.unit_mesh = transformed(both, out.frame);
+  return out;
+}
+
+// The one tool of a shared-tool detection, and both flanks machined.
+void check_one_tool_two_flanks(const Detection& d, const TwoFlanks& tf) {
+  REQUIRE(!d.patches.empty());
+  CHECK(d.shared_tool);
+  CHECK(d.patches.size() <= 3);
+  CHECK(d.stop == CoverStop::Coverage);
+  CHECK(d.coverage >= 0.95);
+  CHECK(worst_overcut(d) <= 1e-4);
+  // One tool: the same radii and axis length for every patch, tip at the a end of each.
+  const FitResult& first = d.patches[0].fit.fit;
+  for (const DetectedPatch& p : d.patches) {
+    CHECK(p.fit.fit.tool.D == first.tool.D);
+    CHECK(p.fit.fit.rails.length == doctest::Approx(first.rails.length).epsilon(1e-9));
+  }
+  // Both flanks are machined: at least 90% of each flank's vertices lie within tolerance.
+  int within[2] = {0, 0}, total[2] = {0, 0};
+  for (size_t v = 0; v < d.deviation.size(); ++v) {
+    const int k = int(v) < tf.first_vertices ? 0 : 1;
+    ++total[k];
+    within[k] += std::isfinite(d.deviation[v]) && std::abs(d.deviation[v]) <= 1e-4;
+  }
+  CHECK(within[0] >= 0.9 * total[0]);
+  CHECK(within[1] >= 0.9 * total[1]);
+}
+}  // namespace
+
+TEST_CASE("tool shared: two separate flanks of one barrel tool are covered by one tool in few patches") {
+  // The arc's flank and the s-curve's, 25 mm apart. The first patch's custom tool is held for every
+  // later candidate (motion only); the joint refit at the end is kept only if it covers as much.
+  const TwoFlanks tf = two_flanks("arc", "s-curve", 40, 120);
+  const SurfaceIndex surface(tf.unit_mesh);
+  CoverOptions o;
+  o.patch.tolerance = 1e-4;
+  o.shared_tool = true;
+  std::vector<std::string> stages;
+  const Detection d = detect_patches(surface, o, [&](const CoverProgress& p) { stages.push_back(p.stage); });
+  MESSAGE("shared tool: " << d.patches.size() << " patches, coverage " << d.coverage << " (first tool held: "
+                          << d.coverage_held_tool << ", joint refit " << (d.joint_refit ? "kept" : "not kept") << ")");
+  check_one_tool_two_flanks(d, tf);
+  CHECK(d.coverage >= d.coverage_held_tool);
+  if (d.patches.size() > 1)
+    CHECK(std::find(stages.begin(), stages.end(), "refitting all patches jointly with one tool") != stages.end());
 }

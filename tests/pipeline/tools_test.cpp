@@ -4,6 +4,9 @@
 
 #include <fmt/format.h>
 
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
 #include <cmath>
 #include <map>
 #include <sstream>
@@ -145,13 +148,25 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
     CAPTURE(msg);
     CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
   }
-  for (const char* key : {"tool: {catalogue: cyl-d6-l20}", "tool: {shared: true}", "allowance: 0.2"}) {
+  for (const char* key : {"allowance: 0.2", "passes: [{allowance: 0.2}, {allowance: 0}]", "tool: {catalogue: cyl-d6-l20}",
+                          "tool: {catalogue: cyl-d6-l20, shared: true}"}) {
     CAPTURE(key);
     const std::string msg = error_of(dir, std::string(key) + "\nsurface: s.obj\npatches: auto\n");
     CAPTURE(msg);
     CHECK(msg.find(dir.file("job.yaml") + ":1: ") != std::string::npos);
     CHECK(msg.find("not with patches: auto") != std::string::npos);
   }
+  // patches: auto takes one shared custom tool, with the custom tool's limits.
+  for (const char* key : {"tool: {shared: true}", "tool: {shared: true, shape: cone, max_diameter: 20}"}) {
+    CAPTURE(key);
+    test::write_text(dir.file("job.yaml"), std::string(key) + "\nsurface: s.obj\npatches: auto\n");
+    const pipeline::Job j = pipeline::read_job(dir.file("job.yaml"));
+    CHECK(j.cover.has_value());
+    CHECK(j.tool.shared);
+    CHECK(!j.tool.catalogue);
+  }
+  CHECK(error_of(dir, "tool: {catalogue: cyl-d6-l20}\nsurface: s.obj\npatches: auto\n").find("tool: {shared: true} for one custom tool") !=
+        std::string::npos);
   const pipeline::Job ok = [&] {
     test::write_text(dir.file("job.yaml"), "tool: {catalogue: barrel-d16-r150-l40, shared: true}\nallowance: 0.3\n" + rest);
     return pipeline::read_job(dir.file("job.yaml"));
@@ -374,4 +389,56 @@ TEST_CASE("passes: each pass is its own section of the patch's program, in order
   REQUIRE(r["passes"].size() == 2);
   CHECK(r["passes"][0]["allowance_mm"] == 0.3);
   CHECK(r["passes"][1]["allowance_mm"] == 0);
+}
+
+TEST_CASE("patches: auto with tool: {shared: true}: one tool for every detected patch, said in report.json") {
+  // Two separate flanks 25 mm apart, each the exact envelope of the same barrel tool under the arc
+  // motion (the second turned half round about z, like a neighbouring blade's flank).
+  test::ScratchDir dir("auto-shared");
+  AnalyticMotionOptions mo;
+  mo.kind = "arc";
+  const LineMotion m = analytic_motion(mo);
+  TriMesh both = envelope_grid(m, barrel_profile(6, 1.5), 40, 120, 1).mesh;
+  TriMesh second = both;
+  const Eigen::Matrix3d half_turn = Eigen::AngleAxisd(M_PI, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  for (auto& v : second.vertices) v = half_turn * v;
+  const BoundingBox b1 = bounding_box(both.vertices), b2 = bounding_box(second.vertices);
+  const Eigen::Vector3d shift(b1.min.x() - b2.min.x(), b1.max.y() - b2.min.y() + 25, 0);
+  const int off = int(both.vertices.size());
+  for (const auto& v : second.vertices) both.vertices.push_back(v + shift);
+  for (auto f : second.faces) both.faces.push_back({f[0] + off, f[1] + off, f[2] + off});
+  write_obj(dir.file("surface.obj"), both);
+  const double tol_mm = 1e-4 * bounding_box(both.vertices).diagonal();
+  test::write_text(dir.file("job.yaml"), fmt::format("surface: surface.obj\ntolerance: {}\ntool: {{shared: true}}\n"
+                                                     "patches: auto\ncover: {{coverage: 0.95, max_patches: 4}}\n",
+                                                     tol_mm));
+  // --allow-collisions: the collision check is not what this test judges (auto-1's first pose reaches
+  // 1.2 mm into the surface near the end of its sweep, reported in report.json; an open follow-up).
+  const test::RunResult r = test::run_flankcam("fit " + dir.file("job.yaml") + " --out " + dir.file("out") + " --quiet --allow-collisions", dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const auto& cover = report["cover"];
+  CHECK(cover["tool"]["policy"] == "shared");
+  CHECK(cover["tool"]["tools"] == 1);
+  const double coverage = cover["coverage"];
+  MESSAGE("auto + shared: " << cover["patches"] << " patches, union coverage " << coverage << ", first tool held "
+                            << cover["tool"]["coverage_first_tool_held"] << ", joint refit kept "
+                            << cover["tool"]["joint_refit_kept"]);
+  CHECK(coverage >= 0.95);
+  CHECK(coverage >= double(cover["tool"]["coverage_first_tool_held"]));
+  CHECK(double(cover["overcut_mm"]) <= tol_mm);
+  const auto& patches = report["patches"];
+  REQUIRE(patches.size() >= 2);  // one flank each at least
+  CHECK(patches.size() <= 3);
+  CHECK(cover["patches"] == patches.size());
+  for (const auto& p : patches) {
+    CHECK(p["tool"]["shared"] == true);
+    CHECK(p["tool"]["profile"] == patches[0]["tool"]["profile"]);  // one meridian, mm
+    CHECK(p["tool"]["length"] == patches[0]["tool"]["length"]);
+  }
+  // detected-job.yaml re-runs the patches with the same shared tool.
+  const std::string detected = test::read_text(dir.file("out/detected-job.yaml"));
+  CHECK(detected.find("shared: true") != std::string::npos);
+  CHECK(detected.find("one shared tool") != std::string::npos);
 }
