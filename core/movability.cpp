@@ -230,7 +230,10 @@ OrientedLine orient_line(const SurfaceIndex& surface, const Eigen::Vector3d& a0,
   // The line as pivot + u e with u in [u0, u1]; turning it keeps u0, u1.
   const double u0 = (a0 - pivot).dot(e0), u1 = (b0 - pivot).dot(e0);
   const Eigen::Vector3d base = pivot + (a0 - pivot - u0 * e0);  // pivot moved onto the line
-  const auto [n1, n2] = normal_plane(e0);
+  // Named, not a structured binding: C++17 lambdas cannot capture bindings (clang rejects it).
+  const std::pair<Eigen::Vector3d, Eigen::Vector3d> plane = normal_plane(e0);
+  const Eigen::Vector3d& n1 = plane.first;
+  const Eigen::Vector3d& n2 = plane.second;
   const auto acceptable = [&](const Movability& m) {
     return m.movable && m.used_samples >= o.min_inside_share * o.movability.samples;
   };

@@ -20,7 +20,7 @@ std::string auto_job(const test::ScratchDir& dir, const std::string& extra) {
 }
 }  // namespace
 
-TEST_CASE("flankcam fit with patches: auto covers an exact envelope with one patch and writes a job that fits it again") {
+TEST_CASE("flankcam fit with patches: auto covers an exact envelope with one patch and writes a job that fits it again" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("auto-fit");
   const std::string job = auto_job(dir, "cover: {coverage: 0.95, max_patches: 3}\n");
   const auto r = test::run_flankcam("fit " + job + " --out " + dir.file("out"), dir);
@@ -84,7 +84,7 @@ TEST_CASE("patches: auto job errors name the file, line and key and write nothin
   }
 }
 
-TEST_CASE("flankcam run of examples/auto posts the detected patch and reports the whole surface") {
+TEST_CASE("flankcam run of examples/auto posts the detected patch and reports the whole surface" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("auto-run");
   const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/auto/job.yaml";
   const auto r = test::run_flankcam("run " + job + " --out " + dir.file("out") + " --threads 2", dir);
@@ -109,7 +109,7 @@ TEST_CASE("flankcam run of examples/auto posts the detected patch and reports th
   CHECK(test::read_text(dir.file("one/auto-1.mpf")) == test::read_text(dir.file("out/auto-1.mpf")));
 }
 
-TEST_CASE("patches: auto on the bundled blade stands every tool tip-down in the work frame and posts it on a head machine") {
+TEST_CASE("patches: auto on the bundled blade stands every tool tip-down in the work frame and posts it on a head machine" * doctest::test_suite("heavy")) {
   // Detection knows no machine: a patch found with its tip at the top would need the head upside
   // down ("rotary axis B would need -172 deg"). The pipeline turns such a patch end for end.
   test::ScratchDir dir("auto-blade");
@@ -132,7 +132,7 @@ TEST_CASE("patches: auto on the bundled blade stands every tool tip-down in the 
   }
 }
 
-TEST_CASE("the README's main job (examples/auto/blade.yaml) detects, fits and posts the blade without lines, and verify passes it") {
+TEST_CASE("the README's main job (examples/auto/blade.yaml) detects, fits and posts the blade without lines, and verify passes it" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("auto-main");
   const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/auto/blade.yaml";
   const auto r = test::run_flankcam("run " + job + " --out " + dir.file("out"), dir);

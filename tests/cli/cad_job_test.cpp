@@ -23,7 +23,7 @@ const char* job_tail =
     "      - [26.078, 7.273, -1.648, 17.213, 13.952, 60.482]\n";
 }  // namespace
 
-TEST_CASE("a job on a STEP and an IGES model fits the flank faces against the whole model, as on the same faces as a mesh") {
+TEST_CASE("a job on a STEP and an IGES model fits the flank faces against the whole model, as on the same faces as a mesh" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("cad-job");
   double eps_step = 0;
   for (const char* ext : {"step", "igs"}) {

@@ -51,7 +51,7 @@ patches:
 }
 }  // namespace
 
-TEST_CASE("flankcam fit: report in mm whose axis lies at the reported radii from the surface") {
+TEST_CASE("flankcam fit: report in mm whose axis lies at the reported radii from the surface" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("cli-fit");
   const Generated g = generate(dir);
   test::write_text(dir.file("job.yaml"), job_text(g));
@@ -123,7 +123,7 @@ TEST_CASE("flankcam fit: report in mm whose axis lies at the reported radii from
   CHECK(double(sd[10]) == doctest::Approx(double(g.truth["radius"][20])).epsilon(0.15));
 }
 
-TEST_CASE("flankcam fit is deterministic: every file but the timings is byte-identical") {
+TEST_CASE("flankcam fit is deterministic: every file but the timings is byte-identical" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("cli-fit-det");
   const Generated g = generate(dir);
   std::string job = job_text(g);
@@ -183,7 +183,7 @@ TEST_CASE("flankcam fit: job errors name the key and line, exit 2 and write noth
   CHECK(test::run_flankcam("fit " + dir.file("absent.yaml") + " --out " + dir.file("out"), dir).code == 2);
 }
 
-TEST_CASE("flankcam fit checks shank and holder against the part: a shank wider than the tool is reported") {
+TEST_CASE("flankcam fit checks shank and holder against the part: a shank wider than the tool is reported" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("cli-fit-collide");
   const Generated g = generate(dir);
   std::string job = job_text(g);
@@ -241,7 +241,7 @@ flankcam::TriMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi)
 }
 }  // namespace
 
-TEST_CASE("flankcam fit with a part: the part's twin of the flank is left to the flank, and a post in the way trims the motion") {
+TEST_CASE("flankcam fit with a part: the part's twin of the flank is left to the flank, and a post in the way trims the motion" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("cli-fit-check");
   // The flank x = 0 (y 0..60, z 0..20 mm, normals +x); the part: the blade behind it, whose flank
   // side is the flank's twin, and a post at y >= 52 standing where the tool (Ø10 about x = 5) would

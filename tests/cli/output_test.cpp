@@ -152,7 +152,7 @@ TEST_CASE("a planted symlink in an existing --out is replaced, never written thr
   CHECK(entries(dir.file("out")) == 3);  // no temporary file or folder left
 }
 
-TEST_CASE("a write failure late in a run leaves nothing: no folder, no programs, no temporary files") {
+TEST_CASE("a write failure late in a run leaves nothing: no folder, no programs, no temporary files" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("out-late-failure");
   const std::string job = blade_job(dir);
   REQUIRE(test::run_flankcam("run " + job + " --out " + dir.file("ok") + " --quiet", dir).code == 0);

@@ -46,7 +46,7 @@ double angle(const Eigen::Vector3d& a, const Eigen::Vector3d& b) { return std::a
 
 }  // namespace
 
-TEST_CASE("flankcam run end to end: the program, back-simulated through the machine, follows the fitted motion") {
+TEST_CASE("flankcam run end to end: the program, back-simulated through the machine, follows the fitted motion" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("run");
   const std::string job = blade_job(dir, "xyzac-trt", "linuxcnc, iso", 1);
   const auto r = test::run_flankcam("run " + job + " --out " + dir.file("out"), dir);
@@ -144,7 +144,7 @@ TEST_CASE("flankcam run end to end: the program, back-simulated through the mach
     CHECK(std::filesystem::exists(dir.file(std::string("out/") + f)));
 }
 
-TEST_CASE("flankcam run: same input, same output, byte for byte at --threads 1 and 2") {
+TEST_CASE("flankcam run: same input, same output, byte for byte at --threads 1 and 2" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("run-repeat");
   const std::string job = blade_job(dir, "xyzac-trt", "linuxcnc", 3);
   REQUIRE(test::run_flankcam("run " + job + " --out " + dir.file("a") + " --threads 2", dir).code == 0);
@@ -199,7 +199,7 @@ TEST_CASE("flankcam run: an unreachable pose or a bad key ends the run with one 
   CHECK(!std::filesystem::exists(dir.file("out3")));
 }
 
-TEST_CASE("flankcam run: a gouging patch gets no program, exit 4, and the report says so") {
+TEST_CASE("flankcam run: a gouging patch gets no program, exit 4, and the report says so" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("run-collide");
   std::string job = test::read_text(blade_job(dir, "xyzac-trt", "linuxcnc", 3));
   // At 0.5 um no cone fits the twisted blade: the cutter's overcut beyond the tolerance is a gouge.
@@ -221,7 +221,7 @@ TEST_CASE("the bundled examples are what the generators make, and their jobs rea
   CHECK(test::read_text(dir.file("blade/lines.yaml")) == test::read_text(ex + "blade/lines.yaml"));
 }
 
-TEST_CASE("flankcam run: the setup places the part on the machine, programs follow while CL-data stays in part coordinates") {
+TEST_CASE("flankcam run: the setup places the part on the machine, programs follow while CL-data stays in part coordinates" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("run-setup");
   std::string job = test::read_text(blade_job(dir, "xyzac-trt", "linuxcnc", 1));
   job.replace(job.find("post: {dialects: [linuxcnc]}"), 28,

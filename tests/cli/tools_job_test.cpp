@@ -21,7 +21,7 @@ int count(const std::string& text, const std::string& word) {
 }
 }  // namespace
 
-TEST_CASE("flankcam run of examples/blade/job-shared-tool.yaml: one tool within its limits, one tool change, a grinding sheet") {
+TEST_CASE("flankcam run of examples/blade/job-shared-tool.yaml: one tool within its limits, one tool change, a grinding sheet" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("shared-tool-run");
   const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/job-shared-tool.yaml";
   const test::RunResult r = test::run_flankcam("run " + job + " --quiet --out " + dir.file("out"), dir);
@@ -51,7 +51,7 @@ TEST_CASE("flankcam run of examples/blade/job-shared-tool.yaml: one tool within 
   CHECK(count(test::read_text(dir.file("out/all-patches.nc")), "M6") == 1);
 }
 
-TEST_CASE("flankcam run of examples/blade/job-catalogue.yaml: the catalogue taper against the best custom tool") {
+TEST_CASE("flankcam run of examples/blade/job-catalogue.yaml: the catalogue taper against the best custom tool" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("catalogue-run");
   const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/job-catalogue.yaml";
   const test::RunResult r = test::run_flankcam("run " + job + " --quiet --out " + dir.file("out"), dir);
@@ -76,7 +76,7 @@ TEST_CASE("flankcam run of examples/blade/job-catalogue.yaml: the catalogue tape
   CHECK(count(test::read_text(dir.file("out/all-patches.nc")), "M6") == 1);
 }
 
-TEST_CASE("passes: NAME.apt holds every pass in order, and flankcam verify finds the program on its CL-data") {
+TEST_CASE("passes: NAME.apt holds every pass in order, and flankcam verify finds the program on its CL-data" * doctest::test_suite("heavy")) {
   // The program cuts the 0.3 mm pass and then the final one; verify compares every cutting block with
   // NAME.apt, so the APT must hold both (it held the last pass only: 101 blocks "off the CL-data").
   test::ScratchDir dir("passes-verify");
@@ -108,7 +108,7 @@ TEST_CASE("passes: NAME.apt holds every pass in order, and flankcam verify finds
   CHECK(count(program, "M6") == 1);
 }
 
-TEST_CASE("depth_cuts: 3: the program, NAME.apt and NAME-cl.csv hold every level, flankcam verify finds them on the CL-data") {
+TEST_CASE("depth_cuts: 3: the program, NAME.apt and NAME-cl.csv hold every level, flankcam verify finds them on the CL-data" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("depth-cuts-verify");
   std::string job = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/job-1-patch.yaml");
   job.replace(job.find("surface: blade.obj"), 18, "surface: " + std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj");

@@ -50,7 +50,7 @@ std::string moved(std::vector<std::string> lines, size_t index, char axis, doubl
 
 }  // namespace
 
-TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm into the blade is refused naming its line") {
+TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm into the blade is refused naming its line" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("verify");
   const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/conical-tool/job.yaml";
   const std::string run = dir.file("run");

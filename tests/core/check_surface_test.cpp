@@ -100,7 +100,7 @@ struct Setup {
 };
 }  // namespace
 
-TEST_CASE("a tool standing next to a wall tilts away instead of cutting it") {
+TEST_CASE("a tool standing next to a wall tilts away instead of cutting it" * doctest::test_suite("heavy")) {
   Setup s;
   // The opposite wall at x >= 14 mm: the upright tool's holder (radius 10 about x = 5) reaches x = 15.
   const SurfaceIndex wall(to_unit(box({14, -20, -10}, {30, 80, 100}, 4), s.fr));
@@ -132,7 +132,7 @@ TEST_CASE("a tool standing next to a wall tilts away instead of cutting it") {
   CHECK(fit.tool.d(1.0) < fit.tool.d(0.0));  // narrower at the holder end: a taper
 }
 
-TEST_CASE("a post in the cutter's way: the motion is kept clear of it or trimmed, and says why") {
+TEST_CASE("a post in the cutter's way: the motion is kept clear of it or trimmed, and says why" * doctest::test_suite("heavy")) {
   Setup s;
   // A post at y >= 52 mm standing where the cutter (Ø10 about x = 5) would end its motion (y = 55).
   const SurfaceIndex post(to_unit(box({1, 52, -10}, {30, 80, 100}, 4), s.fr));
@@ -208,7 +208,7 @@ TriMesh sloping_hub() {
 }
 }  // namespace
 
-TEST_CASE("a tool whose end would cut the hub under the flank is ground shorter at its tip") {
+TEST_CASE("a tool whose end would cut the hub under the flank is ground shorter at its tip" * doctest::test_suite("heavy")) {
   Setup s;
   const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
   PatchOptions po = s.patch_options();
@@ -295,7 +295,7 @@ TEST_CASE("cut_tool keeps the swept tool: rails and radii of the part that stays
   }
 }
 
-TEST_CASE("a ball end is checked as its ball: shortened less than a flat end over the same hub") {
+TEST_CASE("a ball end is checked as its ball: shortened less than a flat end over the same hub" * doctest::test_suite("heavy")) {
   Setup s;
   const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
   PatchOptions po = s.patch_options();

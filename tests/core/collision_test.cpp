@@ -126,7 +126,7 @@ TEST_CASE("a holder passing a thin wall between two clear poses is caught") {
   MESSAGE(r.positions_checked << " positions, " << r.queries << " queries");
 }
 
-TEST_CASE("a clear flank motion along an exact envelope raises no alarm, pushing the part 0.2 mm in does") {
+TEST_CASE("a clear flank motion along an exact envelope raises no alarm, pushing the part 0.2 mm in does" * doctest::test_suite("heavy")) {
   AnalyticMotionOptions mo;
   mo.kind = "twist";
   const LineMotion m = analytic_motion(mo);

@@ -34,7 +34,7 @@ double worst_overcut(const Detection& d) {
 
 }  // namespace
 
-TEST_CASE("auto detection covers an exact envelope with one patch within 1e-4 of the diagonal and no overcut") {
+TEST_CASE("auto detection covers an exact envelope with one patch within 1e-4 of the diagonal and no overcut" * doctest::test_suite("heavy")) {
   // twist cone and s-curve cylinder: seeds at a candidate radius on the wrong side of Φ, or off the
   // axis, fitted to 90% and 68% before the seeds were moved to the nearest axis (refine_seed).
   // The s-curve's 8 written-out lines re-fit (init: lines) to only 69%: the optimiser from the
@@ -79,7 +79,7 @@ TEST_CASE("auto detection covers an exact envelope with one patch within 1e-4 of
   }
 }
 
-TEST_CASE("auto detection covers spline-tool envelopes with one patch: the seeds find the tilted axis") {
+TEST_CASE("auto detection covers spline-tool envelopes with one patch: the seeds find the tilted axis" * doctest::test_suite("heavy")) {
   // The general (spline) tool's meridian is far from a cone: its axis leaves Φ's tangent plane and
   // is not a principal direction, so seeds in the tangent plane ranked wrong lines first (s-curve:
   // 4 patches covering 15%, helix: 5 patches). When the seeded lines' best patch brings little, the
@@ -118,7 +118,7 @@ TEST_CASE("auto detection covers spline-tool envelopes with one patch: the seeds
   }
 }
 
-TEST_CASE("auto detection is deterministic") {
+TEST_CASE("auto detection is deterministic" * doctest::test_suite("heavy")) {
   test::ExactEnvelope ex = test::exact_envelope("s-curve", cylinder_profile(6), 40, 120);
   const SurfaceIndex surface(ex.unit_mesh);
   CoverOptions o;  // a small search: the property is the same at any size
@@ -135,7 +135,7 @@ TEST_CASE("auto detection is deterministic") {
     }
 }
 
-TEST_CASE("two exact envelopes side by side need two patches, in order along the surface, each owning its part") {
+TEST_CASE("two exact envelopes side by side need two patches, in order along the surface, each owning its part" * doctest::test_suite("heavy")) {
   // Two envelopes of different tools along the same s-curve, one after the other in x, joined into one mesh.
   AnalyticMotionOptions mo;
   mo.kind = "twist";

@@ -42,7 +42,7 @@ TEST_CASE("an envelope point satisfies the two envelope conditions and the spher
   CHECK_FALSE(envelope_point(c, c_s, c_t, 6.5, -45.0, 1).valid);  // steeper than the axis: no characteristic
 }
 
-TEST_CASE("every profile under every motion: axis samples lie at distance d(s) from the envelope mesh") {
+TEST_CASE("every profile under every motion: axis samples lie at distance d(s) from the envelope mesh" * doctest::test_suite("heavy")) {
   for (const char* kind : {"twist", "arc", "helix", "s-curve"})
     for (const auto& [name_, profile] : profiles()) {
       const std::string name = name_;  // a copy: CAPTURE's lambda may not name a structured binding (C++17)

@@ -65,7 +65,7 @@ double profile_error_mm(const FitResult& r, const Exact& ex, const RadiusProfile
 }
 }  // namespace
 
-TEST_CASE("surface-driven fits of exact envelopes reach eps <= 1e-4 for every tool shape") {
+TEST_CASE("surface-driven fits of exact envelopes reach eps <= 1e-4 for every tool shape" * doctest::test_suite("heavy")) {
   const std::vector<Case> cases = {{"s-curve", "cylinder", cylinder_profile(6), ToolShape::Cylinder},
                                    {"arc", "cone", cone_profile(6, 9), ToolShape::Cone},
                                    {"twist", "barrel", barrel_profile(6, 1.5), ToolShape::General},
@@ -87,7 +87,7 @@ TEST_CASE("surface-driven fits of exact envelopes reach eps <= 1e-4 for every to
   });
 }
 
-TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4") {
+TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4" * doctest::test_suite("heavy")) {
   const std::vector<Case> cases = {{"twist", "cylinder", cylinder_profile(6), ToolShape::Cylinder},
                                    {"s-curve", "cone", cone_profile(6, 9), ToolShape::Cone},
                                    {"helix", "barrel", barrel_profile(6, 1.5), ToolShape::General},
@@ -105,7 +105,7 @@ TEST_CASE("line-driven fits from one perturbed line reach eps <= 1e-4") {
   });
 }
 
-TEST_CASE("the machined envelope of a fit covers the exact envelope within the tolerance") {
+TEST_CASE("the machined envelope of a fit covers the exact envelope within the tolerance" * doctest::test_suite("heavy")) {
   const Exact ex = exact_envelope("arc", cone_profile(6, 9));
   const SurfaceIndex surface(ex.unit_mesh);
   std::vector<AxisLine> lines;
@@ -148,7 +148,7 @@ FitResult fit_modified(const Exact& ex, const TriMesh& surface_mesh, ToolShape s
 double eps_on(const SurfaceIndex& clean, const FitResult& r) { return sample_error(clean, r.rails, r.tool, {}).max; }
 }  // namespace
 
-TEST_CASE("noise of 1e-4 of the diagonal and two trimmed holes barely move the fitted motion") {
+TEST_CASE("noise of 1e-4 of the diagonal and two trimmed holes barely move the fitted motion" * doctest::test_suite("heavy")) {
   const Exact ex = exact_envelope("arc", cone_profile(6, 9));
   const SurfaceIndex complete(ex.unit_mesh);
 
@@ -179,7 +179,7 @@ TEST_CASE("noise of 1e-4 of the diagonal and two trimmed holes barely move the f
   CHECK(eps_on(complete, with_holes) < 1e-4);
 }
 
-TEST_CASE("a local bump on the design surface: the fit stays on the undisturbed part and coverage drops") {
+TEST_CASE("a local bump on the design surface: the fit stays on the undisturbed part and coverage drops" * doctest::test_suite("heavy")) {
   const Exact ex = exact_envelope("arc", cone_profile(6, 9));
   const SurfaceIndex clean(ex.unit_mesh);
   std::vector<AxisLine> lines;
@@ -288,7 +288,7 @@ TEST_CASE("the hand-written Jacobians of the fit residuals agree with central di
   }
 }
 
-TEST_CASE("a fit reports its status: converged, iteration limit, or a solver failure") {
+TEST_CASE("a fit reports its status: converged, iteration limit, or a solver failure" * doctest::test_suite("heavy")) {
   const Exact ex = exact_envelope("arc", cone_profile(6, 9));
   const SurfaceIndex surface(ex.unit_mesh);
   std::vector<AxisLine> lines;
@@ -373,7 +373,7 @@ MeridianFacts facts_mm(const FitResult& r, const Similarity& frame) {
 }
 }  // namespace
 
-TEST_CASE("tool constraints are met by every fitted tool where the unconstrained fit violates them") {
+TEST_CASE("tool constraints are met by every fitted tool where the unconstrained fit violates them" * doctest::test_suite("heavy")) {
   struct Limits {
     double min_d, max_d, max_len, min_tip, max_angle_deg;
     bool convex;
@@ -460,7 +460,7 @@ TEST_CASE("constrained_tool projects random radii onto every constraint row") {
   }
 }
 
-TEST_CASE("a fixed tool given by its meridian, fitted to its own exact envelope, is recovered by the motion alone") {
+TEST_CASE("a fixed tool given by its meridian, fitted to its own exact envelope, is recovered by the motion alone" * doctest::test_suite("heavy")) {
   // A circle-segment (barrel) tool: Ø16 at the middle, profile radius 150 mm, 40 mm long.
   std::vector<Eigen::Vector2d> zr;
   for (int k = 0; k <= 80; ++k) {

@@ -115,7 +115,7 @@ TEST_CASE("smooth_distance removes most of the chord error of a faceted cylinder
   CHECK(worst_smooth < 0.15 * worst_flat);
 }
 
-TEST_CASE("line-driven: a spline tool on an s-curve from a line 1% and 2 degrees off its axis covers 90% within 1e-4") {
+TEST_CASE("line-driven: a spline tool on an s-curve from a line 1% and 2 degrees off its axis covers 90% within 1e-4" * doctest::test_suite("heavy")) {
   // The radius corrector of the propagation keeps the line on the axis here; without it the line
   // wandered and the fit machined 68% of the envelope (detect_bench envelopes line).
   test::ExactEnvelope ex = test::exact_envelope("s-curve", spline_profile({5.0, 6.5, 7.5, 6.5, 7.0, 8.5}));

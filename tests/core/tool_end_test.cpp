@@ -149,7 +149,7 @@ TEST_CASE("a flat-end cylinder with its tip face on the floor machines the flank
   CHECK(floor_min <= tol);
 }
 
-TEST_CASE("ball and flat ends differ at the floor corner by R (sqrt 2 - 1), and a corner R leaves a fillet of radius R") {
+TEST_CASE("ball and flat ends differ at the floor corner by R (sqrt 2 - 1), and a corner R leaves a fillet of radius R" * doctest::test_suite("heavy")) {
   const TriMesh mesh = flank_on_floor(0.25);
   const SurfaceIndex design(mesh);
   const MachinedSurface flat = machine(design, ToolEnd{}), ball = machine(design, ToolEnd{EndKind::Ball, 0, 1});

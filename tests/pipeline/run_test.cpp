@@ -45,7 +45,7 @@ TEST_CASE("the shipped machines are found from the build tree") {
   CHECK(pipeline::tools_dir() == dir / "tools");
 }
 
-TEST_CASE("cmake --install: the installed flankcam runs the bundled example from another folder") {
+TEST_CASE("cmake --install: the installed flankcam runs the bundled example from another folder" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("install");
   const std::string prefix = dir.file("prefix");
   const std::string install = std::string("\"") + CMAKE_COMMAND + "\" --install \"" + FLANKCAM_BUILD_DIR + "\" --prefix \"" +
@@ -70,7 +70,7 @@ TEST_CASE("cmake --install: the installed flankcam runs the bundled example from
   CHECK(fs::exists(dir.file("elsewhere/out/cone-3.ngc")));
 }
 
-TEST_CASE("post.setup: auto turns the conical-tool blade off the A = 0 singularity of xyzac-trt") {
+TEST_CASE("post.setup: auto turns the conical-tool blade off the A = 0 singularity of xyzac-trt" * doctest::test_suite("heavy")) {
   // Unrotated, cone-1's tool axis stays within a few degrees of the C axis: C swings ~90 deg while
   // the axis turns ~3 deg (a near-singular stretch). auto must choose a rotation without one.
   test::ScratchDir dir("setup-auto");

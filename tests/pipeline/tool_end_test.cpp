@@ -75,7 +75,7 @@ TEST_CASE("tool.end and depth_cuts in a job are checked with file, line and key"
   CHECK(pipeline::read_job(dir.file("job.yaml")).tool.end.kind == EndKind::Flat);  // the default
 }
 
-TEST_CASE("a corner end is in the profile, the collision cutter, the grinding sheet, the DXF and the report, and costs the fillet band's coverage") {
+TEST_CASE("a corner end is in the profile, the collision cutter, the grinding sheet, the DXF and the report, and costs the fillet band's coverage" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("tool-end-corner");
   const pipeline::RunResult flat = run_job(dir, blade_job("tool: {shape: cone}\n"));
   const pipeline::RunResult bull = run_job(dir, blade_job("tool: {shape: cone, end: {corner: 1.5}}\n"));
@@ -122,7 +122,7 @@ TEST_CASE("a corner end is in the profile, the collision cutter, the grinding sh
   CHECK(!bull.programs.empty());
 }
 
-TEST_CASE("a ball end on the blade's general tool: the checks' cutter starts on the axis, programs are posted") {
+TEST_CASE("a ball end on the blade's general tool: the checks' cutter starts on the axis, programs are posted" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("tool-end-ball");
   const pipeline::RunResult ball = run_job(dir, blade_job("tool: {shape: general, end: ball}\n"));
   const pipeline::FittedPatch& b = ball.fit.fitted.patches.at(0);
@@ -135,7 +135,7 @@ TEST_CASE("a ball end on the blade's general tool: the checks' cutter starts on 
   CHECK(!ball.programs.empty());
 }
 
-TEST_CASE("depth_cuts: 3 makes three sections of the patch's program, the tip 2/3 and 1/3 of the cutting length higher, the deepest last") {
+TEST_CASE("depth_cuts: 3 makes three sections of the patch's program, the tip 2/3 and 1/3 of the cutting length higher, the deepest last" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("depth-cuts");
   const pipeline::RunResult run = run_job(dir, blade_job("tool: {shape: cone}\ndepth_cuts: 3\n"));
   const pipeline::FittedPatch& p = run.fit.fitted.patches.at(0);

@@ -178,7 +178,7 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
   CHECK(ok.allowance_mm == 0.3);
 }
 
-TEST_CASE("a catalogue tool fitted to its own exact envelope is recovered: coverage >= 95% within 1e-4 of the diagonal") {
+TEST_CASE("a catalogue tool fitted to its own exact envelope is recovered: coverage >= 95% within 1e-4 of the diagonal" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("catalogue-fit");
   const pipeline::CatalogueTool cat = pipeline::find_catalogue_tool(pipeline::tools_dir(), "barrel-d16-r150-l40");
   // The envelope of the catalogue tool's canal surface (the sphere radii flankcam fits with).
@@ -207,7 +207,7 @@ TEST_CASE("a catalogue tool fitted to its own exact envelope is recovered: cover
   CHECK(j["compare_custom_tool"]["custom"]["eps_mm"].get<double>() == doctest::Approx(p.custom->eps_mm).epsilon(1e-6));
 }
 
-TEST_CASE("a job's tool limits hold on every fitted meridian, and the grinding sheet states them") {
+TEST_CASE("a job's tool limits hold on every fitted meridian, and the grinding sheet states them" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("tool-limits");
   // Barrel: Ø12 at the ends, Ø15 in the middle, 40 mm, 8.5 deg at the ends; the limits cut into all of it.
   const EnvelopeJob e = envelope_job(dir, "twist", barrel_profile(6, 1.5), 40);
@@ -260,7 +260,7 @@ TEST_CASE("a job's tool limits hold on every fitted meridian, and the grinding s
   }
 }
 
-TEST_CASE("tool: {shared: true} gives two patches one identical meridian, each within the tolerance") {
+TEST_CASE("tool: {shared: true} gives two patches one identical meridian, each within the tolerance" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("shared-tool");
   const EnvelopeJob e = envelope_job(dir, "twist", barrel_profile(6, 1.5), 40);
   const double tol_mm = 2e-5 * e.diagonal_mm;  // 0.0026 mm
@@ -283,7 +283,7 @@ TEST_CASE("tool: {shared: true} gives two patches one identical meridian, each w
     }
 }
 
-TEST_CASE("allowance: 0.2 leaves 0.2 mm of stock within the tolerance wherever the tool cuts") {
+TEST_CASE("allowance: 0.2 leaves 0.2 mm of stock within the tolerance wherever the tool cuts" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("allowance");
   const EnvelopeJob e = envelope_job(dir, "arc", cone_profile(6, 9), 40);
   const double tol = 0.01;
@@ -322,7 +322,7 @@ TEST_CASE("allowance: 0.2 leaves 0.2 mm of stock within the tolerance wherever t
   CHECK(j["allowance"]["allowance_mm"] == 0.2);
 }
 
-TEST_CASE("overtravel continues the motion by that many mm beyond both ends along the direction of travel") {
+TEST_CASE("overtravel continues the motion by that many mm beyond both ends along the direction of travel" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("overtravel");
   const EnvelopeJob e = envelope_job(dir, "arc", cylinder_profile(6), 40);
   const std::string rest = "tool: {shape: cylinder}\npatches:\n" + patch_yaml(e, "p", {0, 0.5, 1});
@@ -339,7 +339,7 @@ TEST_CASE("overtravel continues the motion by that many mm beyond both ends alon
   CHECK(b.front().axis == a.front().axis);
 }
 
-TEST_CASE("passes: each pass is its own section of the patch's program, in order, the earlier one 0.3 mm off") {
+TEST_CASE("passes: each pass is its own section of the patch's program, in order, the earlier one 0.3 mm off" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("passes");
   const std::string ex = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/";
   const std::string job = "surface: " + ex + "blade.obj\ntool: {shape: cone}\ntolerance: 0.015\nsampling: {s: 20, t: 60}\n"

@@ -148,7 +148,7 @@ TEST_CASE("every shipped machine and dialect: the posted wall pass back-simulate
   }
 }
 
-TEST_CASE("a cutting block with Z lowered by 1 mm is a gouge on exactly that line, in every dialect") {
+TEST_CASE("a cutting block with Z lowered by 1 mm is a gouge on exactly that line, in every dialect" * doctest::test_suite("heavy")) {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cone), origin));
   for (const Case& c : cases()) {
@@ -296,7 +296,7 @@ TEST_CASE("every shipped machine and dialect: the posted wall pass lies on its C
   }
 }
 
-TEST_CASE("a cylinder's cutting block lowered 1 mm along its axis cuts nothing new, and is named by the CL comparison") {
+TEST_CASE("a cylinder's cutting block lowered 1 mm along its axis cuts nothing new, and is named by the CL comparison" * doctest::test_suite("heavy")) {
   // The tool slides along its own axis: the geometric sweep cannot see it, the CL-data can.
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cylinder), origin));
