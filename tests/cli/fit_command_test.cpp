@@ -297,7 +297,7 @@ TEST_CASE("flankcam fit with a part: the part's twin of the flank is left to the
   CHECK_FALSE(std::filesystem::exists(dir.file("bad")));
 }
 
-TEST_CASE("flankcam run with a part whose coarse twin of a dished flank stands 0.09 mm proud: the program is judged against the flank and the rest of the part, not the twin") {
+TEST_CASE("flankcam run with a part whose coarse twin of a dished flank stands 0.09 mm proud: the program is judged against the flank and the rest of the part, not the twin" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("cli-run-twin");
   // The flank dished by 0.09 mm in its middle, x = -0.09 (1 - ((y - 30) / 30)^2) (y 0..60, z 0..20);
   // the part: the blade block behind it, whose flank side is one coarse quad through the flank's

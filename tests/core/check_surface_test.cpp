@@ -316,7 +316,7 @@ TEST_CASE("a ball end is checked as its ball: shortened less than a flat end ove
   CHECK(tip_z < 2.9);
 }
 
-TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's body samples: trimmed, and the collision check agrees") {
+TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's body samples: trimmed, and the collision check agrees" * doctest::test_suite("heavy")) {
   // The shank (Ø6, z 20-40 over the upright motion) passes a thin fin at z 24.45-24.55 whose edge
   // is 3.99 mm from the axis (clearance 1 mm: 0.01 inside it) for y >= 40. The fit's body samples
   // (every mm) see it 4.015 mm away, outside the clearance; the trim grows them to enclose their
