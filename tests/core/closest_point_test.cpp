@@ -9,6 +9,7 @@
 #include <random>
 
 #include "core/envelope.h"
+#include "core/check_surface.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -348,23 +349,13 @@ int batch_differences(const SurfaceIndex& index, const std::vector<Eigen::Vector
 
 // Two wavy sheets `gap` apart (edges of 1, the second shifted in the plane), as in the test above.
 TriMesh two_sheets(double gap) {
-  TriMesh mesh;
-  const int nx = 40, ny = 30;
-  for (int sheet = 0; sheet < 2; ++sheet) {
-    const int base = int(mesh.vertices.size());
-    for (int j = 0; j < ny; ++j)
-      for (int i = 0; i < nx; ++i) {
-        const double x = i + 0.37 * sheet, y = j + 0.21 * sheet;
-        mesh.vertices.emplace_back(x, y, gap * sheet + 0.05 * std::sin(0.7 * x) * std::cos(0.4 * y));
-      }
-    for (int j = 0; j + 1 < ny; ++j)
-      for (int i = 0; i + 1 < nx; ++i) {
-        const int v = base + j * nx + i;
-        mesh.faces.push_back({v, v + 1, v + nx + 1});
-        mesh.faces.push_back({v, v + nx + 1, v + nx});
-      }
-  }
-  return mesh;
+  const auto sheet = [gap](int k) {
+    return test::grid_mesh(40, 30, [gap, k](int i, int j) {
+      const double x = i + 0.37 * k, y = j + 0.21 * k;
+      return Eigen::Vector3d(x, y, gap * k + 0.05 * std::sin(0.7 * x) * std::cos(0.4 * y));
+    });
+  };
+  return merged(sheet(0), sheet(1));
 }
 }  // namespace
 
