@@ -658,23 +658,19 @@ CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const Che
   out.at.assign(size_t(rows), Eigen::Vector3d::Zero());
   if (!c.part || rows < 2) return out;
   const double L = std::max(rails.length, 1e-12);
+  // `enclose`: spheres along the cutter close enough that the dip of their union, h^2 / (8 d), stays
+  // below a quarter of the tolerance (as the collision check samples it), the smallest radius
+  // counted from a tenth of the largest; rims with enough points that the circle sags between two of
+  // them by under a quarter of the tolerance.
+  int rim_points = 12;
+  double rim_sag = 0;
   if (enclose) {
-    // Spheres along the cutter close enough that the dip of their union, h^2 / (8 d), stays below a
-    // quarter of the tolerance (as the collision check samples it), the smallest radius counted from a
-    // tenth of the largest.
     double dmax = 0;
     for (int j = 0; j <= 64; ++j) dmax = std::max(dmax, tool.d(j / 64.0));
     double dmin = dmax;
     for (int j = 0; j <= 64; ++j) dmin = std::min(dmin, std::max(tool.d(j / 64.0), 0.1 * dmax));
     const double h = std::sqrt(2 * dmin * std::max(c.tolerance, 1e-9));
     samples_s = std::clamp(int(std::ceil(L / h)) + 1, samples_s, 512);
-  }
-  // Rims: enough points that the circle sags between two of them by under a quarter of the tolerance.
-  int rim_points = 12;
-  double rim_sag = 0;
-  if (enclose) {
-    double dmax = 0;
-    for (int j = 0; j <= 64; ++j) dmax = std::max(dmax, tool.d(j / 64.0));
     const double step = std::acos(std::clamp(1 - 0.25 * std::max(c.tolerance, 1e-9) / std::max(dmax, 1e-12), -1.0, 1.0));
     rim_points = std::clamp(int(std::ceil(M_PI / std::max(step, 1e-9))), 12, 720);
     rim_sag = dmax * (1 - std::cos(M_PI / rim_points));
