@@ -514,7 +514,7 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   }
   // With a check surface: kept out of the part (with_check), rejected when no stretch keeps clear.
   out.fit = po.fit.check.part ? with_check(surface, std::move(out.fit), po) : machine_and_trim(surface, std::move(out.fit), po);
-  if (out.fit.gouges || out.fit.check_refused || out.fit.check_intrusion > 0) return out;  // cannot be trimmed clean: rejected
+  if (!machinable(out.fit)) return out;  // no tool, or cannot be trimmed clean: rejected
   for (size_t v = 0; v < area.size(); ++v) {
     const double d = out.fit.machined.design_deviation[v];
     if (!covered[v] && std::isfinite(d) && std::abs(d) <= po.tolerance) out.gain += area[v];
@@ -788,7 +788,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         f.fit = std::move(joint[k]);
         f.tip_shortened = 0;
         f = po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
-        if (f.gouges || f.check_refused || f.check_intrusion > 0) break;
+        if (!machinable(f)) break;
         refit.push_back(std::move(f));
       }
     } catch (const InputError&) {

@@ -310,6 +310,22 @@ std::vector<Eigen::Vector2d> meridian(const ToolRadius& tool, double length, int
   return out;
 }
 
+std::optional<ToolDefect> tool_defect(const ToolRadius& tool, double length) {
+  const RadiusProfile p = tool.profile();
+  const int n = 240;
+  double z_before = -INFINITY;
+  for (int k = 0; k <= n; ++k) {
+    const double s = double(k) / n;
+    const double d = p.d(s), dz = p.d_s(s) / length;
+    if (!(d > 0)) return ToolDefect{s, "its radius reaches 0"};
+    if (!(std::abs(dz) < 1)) return ToolDefect{s, "its radius changes faster than its length (no meridian)"};
+    const double z = s * length - d * dz;  // as meridian()
+    if (!(z > z_before)) return ToolDefect{s, "its meridian turns back on itself"};
+    z_before = z;
+  }
+  return std::nullopt;
+}
+
 ErrorStats sample_error(const SurfaceIndex& surface, const Rails& rails, const ToolRadius& tool, const FitOptions& o) {
   const int m = o.samples_t, n = o.samples_s;
   const auto fps = sample_footpoints(surface, rails, m, n);

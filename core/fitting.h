@@ -196,6 +196,16 @@ struct ErrorStats {
 // envelope of the circles (z, d(z)); unit frame.
 [[nodiscard]] std::vector<Eigen::Vector2d> meridian(const ToolRadius& tool, double length, int points = 61);
 
+// Where the radii d(s) over an axis of `length` describe no tool of revolution: a sphere radius
+// d <= 0, a slope |d'(z)| >= 1 (the circles nest inside each other: no meridian touches them all), or
+// a meridian whose z turns back (the envelope of the circles folds). Checked at 241 points; none
+// for every real tool. A fit on a stretch where Φ holds few samples can drift there.
+struct ToolDefect {
+  double s = 0;           // where along the axis, 0 (tip end) .. 1
+  std::string what;       // "its radius reaches 0", ...
+};
+[[nodiscard]] std::optional<ToolDefect> tool_defect(const ToolRadius& tool, double length);
+
 // The radii projected onto the constraints (least change of the parameters D): every row
 // of G D <= h below holds afterwards within 1e-12. `length` is the axis length L (unit frame).
 // Bounds on r are turned into bounds on d through the steepest slope the result may have.

@@ -151,7 +151,7 @@ std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& 
   for (int k = 1; k <= 12; ++k) {
     const double c = 0.05 * k;
     ToolCut cut = tip_at_a ? cut_tool(r, plain.fit.tool, c, 1) : cut_tool(r, plain.fit.tool, 0, 1 - c);
-    if (cut.radius_error > 0.1 * o.tolerance) continue;
+    if (cut.radius_error > 0.1 * o.tolerance || tool_defect(cut.tool, cut.rails.length)) continue;
     if (check_constraints(cut.tool, cut.rails.length, o.fit.constraints).violation > 0.01 * o.tolerance) continue;
     const CheckProfile p = check_profile(cut.rails, cut.tool, o.fit.check, rows, o.fit.samples_s);
     std::vector<char> ok(static_cast<size_t>(rows));
@@ -191,13 +191,12 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   const bool clear = std::all_of(profile.intrusion.begin(), profile.intrusion.end(), [](double v) { return !(v > 0); });
   PatchFit best = machine_and_trim(surface, plain, o);
   if (clear) return tip_at_a(std::move(best));
-  const auto good = [](const PatchFit& f) { return !f.check_refused && !(f.check_intrusion > 0) && !f.gouges; };
   // The tool shortened at its tip (a hub under the flank's lower edge): clear, it is compared with the
   // trimmed plain motion by coverage (and replaces it when that is not clear).
   if (o.on_stage) o.on_stage("shortening the tool at its tip to keep out of the part");
   bool shortened = false;
-  if (std::optional<PatchFit> cut = cut_at_tip(surface, plain, o); cut && good(*cut))
-    if (!good(best) || cut->coverage > best.coverage) best = std::move(*cut), shortened = true;
+  if (std::optional<PatchFit> cut = cut_at_tip(surface, plain, o); cut && machinable(*cut))
+    if (!machinable(best) || cut->coverage > best.coverage) best = std::move(*cut), shortened = true;
   // The tip was what entered the part (shortening it gained most), or no refit is wanted: a penalised
   // refit, which tilts the whole axis, is not tried (on the HECC impeller it never beat the shortened
   // tool, at ~10 s a patch).
@@ -213,7 +212,8 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   refit.fit.iterations += plain.fit.iterations;
   refit = machine_and_trim(surface, std::move(refit), o);
   // A refit that keeps clear by fitting Φ much worse is no way out.
-  const bool a = good(best), b = good(refit) && refit.fit.eps_opt.max <= std::max(o.tolerance, 2 * plain.fit.eps_opt.max);
+  const bool a = machinable(best);
+  const bool b = machinable(refit) && refit.fit.eps_opt.max <= std::max(o.tolerance, 2 * plain.fit.eps_opt.max);
   if (a != b) return tip_at_a(b ? std::move(refit) : std::move(best));
   if (a && refit.coverage > best.coverage) return tip_at_a(std::move(refit));
   return tip_at_a(std::move(best));  // the better clear one, or neither clear: reported with its collisions
@@ -267,6 +267,10 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
   }
   out.coverage = coverage(surface.mesh(), out.machined.design_deviation, o.tolerance);
   return out;
+}
+
+bool machinable(const PatchFit& f) {
+  return !tool_defect(f.fit.tool, f.fit.rails.length) && !f.gouges && !f.check_refused && !(f.check_intrusion > 0);
 }
 
 Rails trimmed(const Rails& r, double t0, double t1) {

@@ -73,6 +73,10 @@ struct PatchFit {
   std::optional<LineTrajectory> trajectory;  // line-driven only
 };
 
+// A fit that can be machined as it stands: its radii describe a tool (tool_defect), it does not gouge Φ beyond the
+// tolerance, and (with a check surface) it keeps out of the part along its whole motion.
+[[nodiscard]] bool machinable(const PatchFit& f);
+
 // Throws InputError naming the patch when its lines are unusable (too few, zero length,
 // a line that cannot be propagated, a motion that is not over the surface).
 [[nodiscard]] PatchFit fit_patch(const SurfaceIndex& surface, const PatchSpec& spec, const PatchOptions& options);

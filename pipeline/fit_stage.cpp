@@ -173,6 +173,12 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   };
   for (FittedPatch& p : f.patches) {
     const FitResult& r = p.fit.fit;
+    // Radii that describe no tool (a stretch with few samples of Φ let them drift): nothing to check,
+    // grind or post. Detection never keeps such a fit; a user's lines can lead to one.
+    if (const std::optional<ToolDefect> d = tool_defect(r.tool, r.rails.length))
+      throw InputError(fmt::format("patch {}: the fitted radii describe no tool: {} at {:.3f} mm from its tip end; set "
+                                   "tool.min_diameter and tool.max_cone_angle, or start the patch elsewhere",
+                                   p.job->name, d->what, d->s * f.frame.length_to_mm(r.rails.length)));
     p.poses = poses_mm(job, f.frame, r.rails);
     p.assembly = assembly_of(job, f.frame, r);
     // tool.end: the profile ends in it, and a rounded end is the cutter the check sees (tool_end.h).

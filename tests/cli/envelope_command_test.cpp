@@ -50,6 +50,11 @@ TEST_CASE("flankcam envelope rejects bad options with a non-zero exit and writes
   CHECK(run("envelope --motion loop --out " + dir.file("b")) == 2);
   CHECK(run("envelope --profile cone --radius-end 60 --out " + dir.file("c")) == 2);  // no characteristic
   CHECK(run("envelope --length -3 --out " + dir.file("d")) == 2);
-  CHECK(run("envelope --grid-s 1 --out " + dir.file("e")) != 0);
-  for (const char* d : {"a", "b", "c", "d", "e"}) CHECK_FALSE(std::filesystem::exists(dir.file(d) + "/envelope.obj"));
+  CHECK(run("envelope --grid-s 1 --out " + dir.file("e")) == 2);
+  // Usage errors (CLI11's own exit codes are 105-109) end like any other bad input.
+  CHECK(run("envelope --no-such-option 3 --out " + dir.file("f")) == 2);
+  CHECK(run("envelope --grid-s abc --out " + dir.file("g")) == 2);
+  CHECK(run("run --job x.yaml --out " + dir.file("h")) == 2);
+  CHECK(run("envelope --help") == 0);
+  for (const char* d : {"a", "b", "c", "d", "e", "f", "g", "h"}) CHECK_FALSE(std::filesystem::exists(dir.file(d) + "/envelope.obj"));
 }

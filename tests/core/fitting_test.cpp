@@ -19,7 +19,9 @@
 #include <random>
 
 #include "core/errors.h"
+#include "core/collision.h"
 #include "core/machined_surface.h"
+#include "core/patch.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -439,6 +441,47 @@ TEST_CASE("tool constraints are met by every fitted tool where the unconstrained
     CHECK(fit.status != FitStatus::SolverFailed);
     CHECK(cov > 0.1);
   }
+}
+
+TEST_CASE("tool_defect finds radii that describe no tool, and such a fit is not machinable") {
+  const auto general = [](std::vector<double> D) {
+    ToolRadius t;
+    t.D = std::move(D);
+    return t;
+  };
+  ToolRadius cone;
+  cone.shape = ToolShape::Cone;
+  cone.D = {0.05, 0.15};
+  CHECK_FALSE(tool_defect(cone, 0.3));                                   // slope 1/3
+  CHECK_FALSE(tool_defect(general({0.1, 0.12, 0.13, 0.12, 0.1}), 0.3));  // a barrel
+  cone.D = {0.05, 0.5};                                                  // slope 1.5: the circles nest
+  const std::optional<ToolDefect> steep = tool_defect(cone, 0.3);
+  REQUIRE(steep);
+  CHECK(steep->what.find("faster than its length") != std::string::npos);
+  CHECK(steep->s == 0.0);
+  // A radius through zero: found where it first reaches it; the collision check's own assembly of
+  // the same radii (61 samples, as the pipeline builds it) refuses them too.
+  const ToolRadius zero = general({0.1, 0.05, -0.05, 0.05, 0.1});
+  const std::optional<ToolDefect> z = tool_defect(zero, 1.0);
+  REQUIRE(z);
+  CHECK(z->what == "its radius reaches 0");
+  CHECK(zero.d(z->s) <= 0);
+  CHECK(zero.d(z->s - 1.0 / 240) > 0);
+  ToolAssembly a;
+  for (int j = 0; j <= 60; ++j) a.cutter.emplace_back(1.0 * j / 60, zero.d(j / 60.0));
+  CHECK(a.validate().find("radii must be positive") != std::string::npos);
+  // A waist too deep for its length: the slope stays below 1 (0.75 at most) but the envelope of
+  // the circles folds (z' = L - d d_ss / L < 0 at the middle).
+  const std::optional<ToolDefect> fold = tool_defect(general({0.2, 0.15, 0.15, 0.2}), 0.2);
+  REQUIRE(fold);
+  CHECK(fold->what == "its meridian turns back on itself");
+  CHECK_FALSE(tool_defect(general({0.2, 0.15, 0.15, 0.2}), 0.3));  // the same waist on a longer axis
+  PatchFit f;
+  f.fit.rails.length = 1.0;
+  f.fit.tool = general({0.1, 0.12, 0.13, 0.12, 0.1});
+  CHECK(machinable(f));
+  f.fit.tool = zero;
+  CHECK_FALSE(machinable(f));
 }
 
 TEST_CASE("constrained_tool projects random radii onto every constraint row") {
