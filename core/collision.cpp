@@ -206,8 +206,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
         if (zq < -1e-9 * (1 + L) || zq > L) continue;  // beyond the cutter's end: the shank's samples see it
         h.depth = std::min(cutter_radius(tool, std::clamp(zq, 0.0, L)) - rho, std::max(zq, 0.0));
         if (h.depth <= o.gouge_tolerance_mm) continue;
-        // The part's own tessellation of Φ's edges: left to the design surface's check.
-        if (o.design && o.design->closest(f.point).distance <= o.design_within_mm) continue;
+        if (o.design && left_to_design(*o.design, f.point, o.design_within_mm)) continue;
       } else {
         // Exact gap between the part point and the solid of revolution (2D, in the axis' half plane).
         const Eigen::Vector3d d = f.point - pos[size_t(here)].tip;

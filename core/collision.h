@@ -72,6 +72,13 @@ struct CollisionReport {
   [[nodiscard]] bool clear() const { return intervals.empty(); }
 };
 
+// A cutter hit on the part without Φ's twin at `part_point` that is Φ's to judge: within `within_mm`
+// of the design surface (the twin's sag plus the tolerance), where the part's coarse faces meet the
+// hole the twin left. check_collisions and the back-simulation's sweep (postproc/verify) skip these.
+[[nodiscard]] inline bool left_to_design(const SurfaceIndex& design, const Eigen::Vector3d& part_point, double within_mm) {
+  return design.closest(part_point).distance <= within_mm;
+}
+
 [[nodiscard]] CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<ToolPose>& poses,
                                                const ToolAssembly& tool, const CollisionOptions& options);
 

@@ -187,10 +187,10 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   const auto tip_at_a = [&](PatchFit f) {
     return o.orient_by_part && mean_axis(f.fit.rails).dot(*o.fit.check.up) < 0 ? reversed(std::move(f)) : f;
   };
-  const CheckProfile profile = check_profile(plain.fit.rails, plain.fit.tool, o.fit.check, 2 * o.fit.samples_t, o.fit.samples_s);
-  const bool clear = std::all_of(profile.intrusion.begin(), profile.intrusion.end(), [](double v) { return !(v > 0); });
+  // Clear along the whole motion: machine_and_trim's check (as dense as the collision check) found
+  // no intrusion to trim for.
   PatchFit best = machine_and_trim(surface, plain, o);
-  if (clear) return tip_at_a(std::move(best));
+  if (!(best.check_trim && best.check_trim->intrusion > 0)) return tip_at_a(std::move(best));
   // The tool shortened at its tip (a hub under the flank's lower edge): clear, it is compared with the
   // trimmed plain motion by coverage (and replaces it when that is not clear).
   if (o.on_stage) o.on_stage("shortening the tool at its tip to keep out of the part");

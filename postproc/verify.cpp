@@ -230,8 +230,8 @@ void sweep(const SurfaceIndex& part, const SurfaceIndex* design, const std::vect
           double& mc = vb.min_clearance_mm[size_t(comp)];
           mc = std::min(mc, g);
           bool hit = sb.rapid ? g < o.link_clearance_mm : (comp == Component::Tool ? -g > j.gouge_tolerance_mm : g < 0);
-          // The cut part's coarse edges along the hole of Φ's twin are Φ's (judged by the design).
-          if (hit && jj == 1 && comp == Component::Tool && design->closest(f.point).distance <= o.design_within_mm) hit = false;
+          // judge 1, the part without Φ's twin: its coarse edges along the twin's hole are Φ's
+          if (hit && jj == 1 && comp == Component::Tool && left_to_design(*design, f.point, o.design_within_mm)) hit = false;
           if (hit && -g > worst[size_t(comp)].depth_mm) {
             VerifyHit& h = worst[size_t(comp)];
             h.block = sb.block, h.line = sb.line, h.rapid = sb.rapid, h.component = comp;
