@@ -650,6 +650,23 @@ CheckDistance check_distance(const CheckSurface& c, const Eigen::Vector3d& p, co
   return out;
 }
 
+// Shank and holder keep their clearance from the whole part, Φ's twin included: only the cutter is
+// Φ's to judge (with the fit's tolerance). Above a patch shorter than the flank the shank runs along
+// Φ's continuation, which the part without its twin does not hold (rotor 37 with a 50 mm tool: the
+// shank 0.3-0.7 mm into the blade it cuts, found only by the collision check). The twin's chords
+// stand off Φ by at most its sag, far below any clearance.
+CheckDistance body_distance(const SurfaceIndex& solid, const Eigen::Vector3d& p, const Footpoint& f) {
+  CheckDistance out;
+  if (f.face < 0 || !std::isfinite(f.distance)) return out;
+  const Eigen::Vector3d nf = face_normal(solid.mesh(), f.face);
+  const Eigen::Vector3d v = p - f.point;
+  const double sign = v.dot(nf) < 0 ? -1.0 : 1.0;
+  out.q = f.point;
+  out.distance = sign * f.distance;
+  out.g = f.distance > 1e-12 ? Eigen::Vector3d(sign * v / f.distance) : nf;
+  return out;
+}
+
 // Footpoints of the check samples of one motion on the part.
 std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c, const std::vector<CheckSample>& samples,
                                            int m) {
@@ -661,7 +678,8 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
   if (c.solid) whole = c.solid->closest(pts);
   std::vector<CheckDistance> out(samples.size());
   for (size_t k = 0; k < samples.size(); ++k)
-    out[k] = check_distance(c, pts[k], fps[k], c.solid ? &whole[k] : nullptr);
+    out[k] = samples[k].body && c.solid ? body_distance(*c.solid, pts[k], whole[k])
+                                        : check_distance(c, pts[k], fps[k], c.solid ? &whole[k] : nullptr);
   return out;
 }
 }  // namespace

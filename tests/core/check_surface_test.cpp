@@ -179,6 +179,48 @@ TEST_CASE("the part's twin of the design surface is left out of the check surfac
   CHECK(check_part(thin, phi, 0.01).twin_faces == 32);
 }
 
+TEST_CASE("shank and holder keep their clearance from the design surface too: a shank wider than the cutter over a taller flank") {
+  // Φ: the flank x = 0, y in [0, 60], z in [0, 100]; the part: the block behind it, whose x = 0 side
+  // is Φ's twin (left out of the check surface). The cutter (Ø10, z 5-25) runs along Φ, and above
+  // it the shank (40 mm) along Φ's continuation, as on a blade taller than the tool (rotor 37).
+  const TriMesh phi_mm = test::grid_mesh(31, 51, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * j, 2.0 * k); });
+  const Similarity fr = unit_diagonal_frame(phi_mm);
+  const SurfaceIndex phi(transformed(phi_mm, fr));
+  const TriMesh block = transformed(box({-10, 0, 0}, {0, 60, 100}, 4), fr);
+  const CheckPart cp = check_part(block, phi, fr.length_to_unit(0.01));
+  REQUIRE(cp.twin_faces == 32);
+  const SurfaceIndex part(cp.mesh), solid(block);
+  std::vector<AxisLine> lines;
+  for (double y : {10.0, 25.0, 40.0, 50.0}) lines.push_back({fr.to_unit({5, y, 5}), fr.to_unit({5, y, 25})});
+  const Rails rails = rails_from_lines(lines, 0, 0, FitOptions{});
+  ToolRadius cylinder;
+  cylinder.shape = ToolShape::Cylinder;
+  cylinder.D = {fr.length_to_unit(5)};
+  // The worst intrusion (mm) over the motion with a shank of radius r (clearance 1 mm), and whether
+  // it is the body's.
+  const auto worst = [&](double r) {
+    CheckSurface c;
+    c.part = &part, c.solid = &solid, c.solid_twin = &cp.twin, c.twin_sag = cp.twin_sag;
+    c.tolerance = fr.length_to_unit(0.01), c.clearance = fr.length_to_unit(1.0);
+    c.up = Eigen::Vector3d::UnitZ();
+    for (int k = 0; k <= 40; ++k) c.body.emplace_back(fr.length_to_unit(k), fr.length_to_unit(r));
+    const CheckProfile p = check_profile(rails, cylinder, c, 50, 30, true);
+    const auto w = std::max_element(p.intrusion.begin(), p.intrusion.end());
+    return std::make_pair(fr.length_to_mm(*w), p.body[size_t(w - p.intrusion.begin())] != 0);
+  };
+  // Ø12: 1 mm into Φ above the cut, plus the clearance (the samples grown to enclose their slabs: a
+  // little more). Before, the shank was measured against the part without the twin: clear.
+  const auto [into, into_body] = worst(6.0);
+  CHECK(into_body);
+  CHECK(into == doctest::Approx(2.0).epsilon(0.08));
+  // Ø9: 0.5 mm off Φ, inside the 1 mm clearance by 0.5.
+  const auto [near, near_body] = worst(4.5);
+  CHECK(near_body);
+  CHECK(near == doctest::Approx(0.5).epsilon(0.3));
+  // Ø7: 1.5 mm off Φ: clear.
+  CHECK(worst(3.5).first <= 0);
+}
+
 TEST_CASE("check surface options name the bad field") {
   const SurfaceIndex wall(box({14, -20, -10}, {30, 80, 100}));
   FitOptions o;
