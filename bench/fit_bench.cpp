@@ -82,8 +82,9 @@ int main(int argc, char** argv) {
     const std::string index = t_index.since();
     const Timed t = fit_line_driven(surface, m, frame, o);
     fmt::print("fit 1M: {} vertices: load {}, index {}, initialisation {}, optimisation {}: total {} [goal <= 10 s], "
-               "{} iterations, eps_opt {:.2e}\n",
-               surface.mesh().vertices.size(), load, index, t.init, t.opt, total.since(), t.r.iterations, t.r.eps_opt.max);
+               "{} outer iterations ({}), eps_opt {:.2e}\n",
+               surface.mesh().vertices.size(), load, index, t.init, t.opt, total.since(), t.r.iterations,
+               to_string(t.r.status), t.r.eps_opt.max);
     std::remove(path.c_str());
   }
 }

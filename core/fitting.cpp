@@ -57,6 +57,8 @@ std::string FitOptions::validate() const {
   if (solver_iterations < 1) return "solver_iterations: at least 1";
   if (!(stall >= 0)) return "stall: must be >= 0";
   if (!(motion_tolerance >= 0) || !std::isfinite(motion_tolerance)) return "motion_tolerance: must be finite and >= 0";
+  if (!(plateau >= 0 && plateau < 1)) return "plateau: must be in [0, 1)";
+  if (plateau_rounds < 0) return "plateau_rounds: must be >= 0";
   if (!(robust_scale >= 0) || !std::isfinite(robust_scale)) return "robust_scale: must be finite and >= 0";
   if (!(w_constraint >= 0) || !std::isfinite(w_constraint)) return "w_constraint: must be finite and >= 0";
   if (auto err = constraints.validate(); !err.empty()) return err;
@@ -326,11 +328,12 @@ std::optional<ToolDefect> tool_defect(const ToolRadius& tool, double length) {
   return std::nullopt;
 }
 
-ErrorStats sample_error(const SurfaceIndex& surface, const Rails& rails, const ToolRadius& tool, const FitOptions& o) {
-  const int m = o.samples_t, n = o.samples_s;
-  const auto fps = sample_footpoints(surface, rails, m, n);
+namespace {
+// ε of eq. (13) from the footpoints of the m x n samples (row-major); the histogram only when asked.
+ErrorStats footpoint_error(const std::vector<Footpoint>& fps, const ToolRadius& tool, int m, int n, bool histogram) {
   ErrorStats e;
   std::vector<double> errs;
+  errs.reserve(fps.size());
   for (int i = 0; i < m; ++i)
     for (int j = 0; j < n; ++j) {
       const Footpoint& f = fps[size_t(i) * n + j];
@@ -344,11 +347,35 @@ ErrorStats sample_error(const SurfaceIndex& surface, const Rails& rails, const T
   if (errs.empty()) return e;
   e.max = *std::max_element(errs.begin(), errs.end());
   e.mean = std::accumulate(errs.begin(), errs.end(), 0.0) / double(errs.size());
+  if (!histogram) return e;
   const int bins = 10;
   e.histogram.assign(bins, 0);
   for (int k = 0; k <= bins; ++k) e.bin_edges.push_back(e.max * k / bins);
   for (double x : errs) ++e.histogram[std::min(bins - 1, e.max > 0 ? int(x / e.max * bins) : 0)];
   return e;
+}
+}  // namespace
+
+ErrorStats sample_error(const SurfaceIndex& surface, const Rails& rails, const ToolRadius& tool, const FitOptions& o) {
+  return footpoint_error(sample_footpoints(surface, rails, o.samples_t, o.samples_s), tool, o.samples_t, o.samples_s, true);
+}
+
+bool fit_plateaued(const std::vector<RoundMeasures>& history, double progress, int rounds) {
+  const size_t k = history.size();
+  if (rounds < 1 || k <= size_t(rounds)) return false;
+  const size_t first = k - size_t(rounds);
+  RoundMeasures best = history.front();
+  for (size_t r = 1; r < first; ++r) {
+    best.objective = std::min(best.objective, history[r].objective);
+    best.eps = std::min(best.eps, history[r].eps);
+    best.mean_error = std::min(best.mean_error, history[r].mean_error);
+  }
+  const double keep = 1 - progress;
+  for (size_t r = first; r < k; ++r)
+    if (history[r].objective < keep * best.objective || history[r].eps < keep * best.eps ||
+        history[r].mean_error < keep * best.mean_error)
+      return false;
+  return true;
 }
 
 bool ToolConstraints::active() const {
@@ -802,7 +829,21 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
   const int K = int(st.tool.D.size());
   const bool constrained = radii_free && o.constraints.active();
   st.status = FitStatus::IterationLimit;
+  std::vector<RoundMeasures> history;  // of the motion before each round
   for (int iter = 0; iter < max_rounds; ++iter) {
+    // Footpoints of every patch's samples; their distance errors are eq. (13) of the motion so far.
+    std::vector<std::vector<Footpoint>> footpoints(P);
+    RoundMeasures before;
+    int counted = 0;
+    for (size_t p = 0; p < P; ++p) {
+      footpoints[p] = sample_footpoints(*surfaces[p], st.rails[p], m, n);
+      const ErrorStats e = footpoint_error(footpoints[p], st.tool, m, n, false);
+      before.eps = std::max(before.eps, e.max);
+      before.mean_error += e.mean * e.samples;
+      counted += e.samples;
+    }
+    if (counted > 0) before.mean_error /= counted;
+
     // Unknowns: control points of every a(t), b(t) and the radius parameters D.
     std::vector<std::vector<double>> As(P, std::vector<double>(size_t(3 * Nc))), Bs = As;
     for (size_t p = 0; p < P; ++p)
@@ -830,7 +871,7 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
       std::vector<double>& B = Bs[p];
       const Rails& rails = st.rails[p];
       const double L = rails.length;
-      const auto fps = sample_footpoints(*surfaces[p], rails, m, n);
+      const std::vector<Footpoint>& fps = footpoints[p];
       for (int i = 0; i < m; ++i) {
         const BasisRow& row = rows[size_t(i)];
         std::vector<double*> blocks;
@@ -966,6 +1007,10 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
       moved = std::max(moved, std::abs((next[sp.p].point(t, s) - st.rails[sp.p].point(t, s)).dot(sp.n) -
                                        (next_tool.d(s) - st.tool.d(s))));
     }
+    // The solve starts from the motion so far at fresh footpoints: its initial cost is that motion's
+    // F_motion (with fair_update, F_fair of the update is 0 there).
+    before.objective = 2 * summary.initial_cost;
+    history.push_back(before);
     st.rails = std::move(next);
     st.tool = std::move(next_tool);
     const double objective = 2 * summary.final_cost;  // F_motion, eq. (12)
@@ -977,6 +1022,13 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
     // progress is judged within a solve).
     if (objective <= 0 || moved <= o.motion_tolerance ||
         summary.initial_cost - summary.final_cost < o.stall * summary.initial_cost) {
+      st.status = FitStatus::Converged;
+      break;
+    }
+    // Or when the rounds have stopped lowering F_motion at fresh footpoints, ε and the mean error:
+    // each solve may still lower its own objective, by sliding the motion along a nearly free
+    // direction (FitOptions::plateau).
+    if (fit_plateaued(history, o.plateau, o.plateau_rounds)) {
       st.status = FitStatus::Converged;
       break;
     }

@@ -323,6 +323,47 @@ TEST_CASE("a fit reports its status: converged, iteration limit, or a solver fai
   CHECK(fit_residuals::solve_failed(summary));
 }
 
+TEST_CASE("the plateau rule stops a fit whose rounds lower none of F, eps and the mean error, and no other") {
+  // F_motion at fresh footpoints, eps and mean error before each round of fit_bench's 1M-vertex fit (in
+  // units of 1e-12, 1e-6, 1e-7): from round 9 on the motion's ends slid along the rim, F sawed up and
+  // down as samples came back over it, eps and the mean error flattened and then grew.
+  const std::vector<RoundMeasures> slide = {
+      {3.39e6, 9482.8, 18557}, {9.87, 13.743, 23.156}, {6.04, 8.4566, 14.148}, {5.02, 6.3316, 11.110},
+      {5.79, 5.2342, 9.6525},  {5.22, 4.9141, 8.8888}, {4.76, 4.7953, 8.4634}, {4.39, 4.6905, 8.2067},
+      {6.55, 4.6309, 8.0534},  {5.92, 4.6102, 7.9844}, {5.40, 4.5814, 7.9585}, {4.96, 4.5511, 7.9582},
+      {5.89, 4.5202, 7.9691},  {5.31, 4.5525, 8.0085}, {4.84, 4.6775, 8.0539}, {5.77, 4.7910, 8.0981}};
+  int stop = -1;
+  for (size_t k = 1; k <= slide.size() && stop < 0; ++k)
+    if (fit_plateaued(std::vector<RoundMeasures>(slide.begin(), slide.begin() + std::ptrdiff_t(k)), 1e-2, 3)) stop = int(k);
+  // Round 13's eps is 1.3% below the best of rounds 1-11 (progress in rounds 12-14), none in rounds 13-15.
+  CHECK(stop == 15);
+  // Each measure alone keeps a fit going while it falls by more than the share within the window.
+  for (int measure = 0; measure < 3; ++measure) {
+    CAPTURE(measure);
+    std::vector<RoundMeasures> h;
+    for (int r = 0; r < 25; ++r) {
+      RoundMeasures x{5 + 0.5 * (r % 3), 4.6, 8.0};  // F saws, eps and mean are flat
+      double* falling[] = {&x.objective, &x.eps, &x.mean_error};
+      *falling[measure] = 10 * std::pow(0.995, r);    // 1.5% in 3 rounds
+      h.push_back(x);
+      CHECK_FALSE(fit_plateaued(h, 1e-2, 3));
+    }
+    CHECK(fit_plateaued(h, 2e-2, 3));  // not by 2% in 3 rounds
+  }
+  // Not before `rounds` + 1 rounds; 0 rounds disables the rule.
+  const std::vector<RoundMeasures> flat(4, RoundMeasures{1, 1, 1});
+  CHECK_FALSE(fit_plateaued({flat.begin(), flat.begin() + 3}, 1e-2, 3));
+  CHECK(fit_plateaued(flat, 1e-2, 3));
+  CHECK(fit_plateaued(flat, 0, 3));
+  CHECK_FALSE(fit_plateaued(flat, 1e-2, 0));
+  FitOptions o;
+  o.plateau = 1;
+  CHECK(o.validate() == "plateau: must be in [0, 1)");
+  o.plateau = 1e-2;
+  o.plateau_rounds = -1;
+  CHECK(o.validate() == "plateau_rounds: must be >= 0");
+}
+
 TEST_CASE("line-driven initialisation from a line with a 1e308 coordinate ends in an InputError, not a crash") {
   // Issue 12, item 1: the closest-point search read faces[-1] for such points.
   const Exact ex = exact_envelope("arc", cone_profile(6, 9));
