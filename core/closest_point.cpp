@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <cstring>
 #include <limits>
+#include <mutex>
 #include <numeric>
 #ifdef __SSE2__
 #include <emmintrin.h>
@@ -223,6 +224,8 @@ inline int near_mask(const Node4& w, const float* d2, float prune2) {
 struct SurfaceIndex::Impl {
   TriMesh mesh;
   std::vector<Eigen::Vector3d> normals;
+  std::once_flag across_once;               // pseudo_normal's edge neighbours, built on first use
+  std::vector<std::array<int, 3>> across;   // per face, per edge k (corners k, k+1): the other face, or -1
   MeshTopology topology;
   double cover = 0;
   std::vector<Node4> wide;                  // wide[0] is the root
@@ -1037,6 +1040,56 @@ Footpoint SurfaceIndex::closest_brute_force(const Eigen::Vector3d& p) const {
   const auto& F = s.mesh.faces[size_t(face)];
   const TrianglePoint tp = closest_on_triangle(p, s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])], s.mesh.vertices[size_t(F[2])]);
   return s.make_footpoint(p, face, tp, s.boundary_flags(face));
+}
+
+namespace {
+// The face across each edge (corners k, k+1) of every face: the one other face with that edge, or -1
+// (a boundary edge, or one shared by more than two faces).
+std::vector<std::array<int, 3>> faces_across(const TriMesh& m) {
+  struct Edge {
+    uint64_t key;
+    int face, edge;
+  };
+  std::vector<Edge> edges;
+  edges.reserve(3 * m.faces.size());
+  for (size_t f = 0; f < m.faces.size(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const auto a = uint32_t(m.faces[f][size_t(k)]), b = uint32_t(m.faces[f][size_t((k + 1) % 3)]);
+      edges.push_back({uint64_t(std::min(a, b)) << 32 | std::max(a, b), int(f), k});
+    }
+  std::sort(edges.begin(), edges.end(), [](const Edge& x, const Edge& y) {
+    return x.key != y.key ? x.key < y.key : x.face != y.face ? x.face < y.face : x.edge < y.edge;
+  });
+  std::vector<std::array<int, 3>> across(m.faces.size(), {-1, -1, -1});
+  for (size_t i = 0; i < edges.size();) {
+    size_t j = i;
+    while (j < edges.size() && edges[j].key == edges[i].key) ++j;
+    if (j - i == 2) {
+      across[size_t(edges[i].face)][size_t(edges[i].edge)] = edges[i + 1].face;
+      across[size_t(edges[i + 1].face)][size_t(edges[i + 1].edge)] = edges[i].face;
+    }
+    i = j;
+  }
+  return across;
+}
+}  // namespace
+
+Eigen::Vector3d SurfaceIndex::pseudo_normal(const Footpoint& f) const {
+  Impl& s = *impl_;
+  if (f.face < 0 || size_t(f.face) >= s.mesh.faces.size()) return Eigen::Vector3d::Zero();
+  const auto& F = s.mesh.faces[size_t(f.face)];
+  const Eigen::Vector3d nf = face_normal(s.mesh, f.face);
+  const double eps = 1e-9;
+  for (int k = 0; k < 3; ++k)  // at a corner
+    if (f.barycentric[k] > 1 - eps) return s.normals[size_t(F[size_t(k)])];
+  for (int k = 0; k < 3; ++k)  // on the edge opposite corner k, i.e. edge (k + 1) % 3
+    if (f.barycentric[k] < eps) {
+      std::call_once(s.across_once, [&s] { s.across = faces_across(s.mesh); });
+      const int g = s.across[size_t(f.face)][size_t((k + 1) % 3)];
+      const Eigen::Vector3d n = nf + (g >= 0 ? face_normal(s.mesh, g) : Eigen::Vector3d::Zero());
+      return n.norm() > 1e-12 ? Eigen::Vector3d(n.normalized()) : nf;
+    }
+  return nf;
 }
 
 const TriMesh& SurfaceIndex::mesh() const { return impl_->mesh; }

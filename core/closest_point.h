@@ -58,6 +58,13 @@ class SurfaceIndex {
   [[nodiscard]] const std::vector<Eigen::Vector3d>& normals() const;  // per vertex
   [[nodiscard]] const MeshTopology& topology() const;
   [[nodiscard]] double covering_radius() const;  // max over triangles of max distance to nearest corner
+  // The angle-weighted pseudo-normal at a footpoint of this mesh (Bærentzen & Aanæs, IEEE TVCG 11(3),
+  // 2005): the face normal inside a face, the normalised sum of both faces' normals on an edge, the
+  // angle-weighted vertex normal at a corner. On a closed, consistently oriented mesh the sign of
+  // <p - footpoint, pseudo-normal> tells outside (> 0) from inside for any p, also next to sharp edges
+  // where the closest face's own normal may point either way (a thin blade's edge or tip: points far
+  // above it looked deep inside). Edge neighbours are found on first use (both cores may ask).
+  [[nodiscard]] Eigen::Vector3d pseudo_normal(const Footpoint& f) const;
 
  struct Impl;  // declared here so that the search visitor in the .cpp can see it
 

@@ -665,11 +665,11 @@ CheckDistance check_distance(const CheckSurface& c, const Eigen::Vector3d& p, co
     // stand proud of Φ, which the cutter touches by construction).
     const bool twin = c.solid_twin && size_t(whole->face) < c.solid_twin->size() && (*c.solid_twin)[size_t(whole->face)];
     const double margin = c.tolerance + (twin ? c.twin_sag : 0.0);
-    sign = (p - whole->point).dot(face_normal(c.solid->mesh(), whole->face)) < -margin ? -1.0 : 1.0;
+    sign = (p - whole->point).dot(c.solid->pseudo_normal(*whole)) < -margin ? -1.0 : 1.0;
   } else {
-    // The sign is that of the closest face's normal, except at the part's boundary (where a
+    // The sign is that of the pseudo-normal at the closest point, except at the part's boundary (where a
     // point in front of a hole is outside though the face normal next to its edge may say otherwise).
-    sign = !f.on_boundary && v.dot(nf) < 0 ? -1.0 : 1.0;
+    sign = !f.on_boundary && v.dot(part.pseudo_normal(f)) < 0 ? -1.0 : 1.0;
   }
   out.q = f.point;
   out.distance = sign * f.distance;
@@ -687,7 +687,7 @@ CheckDistance body_distance(const SurfaceIndex& solid, const Eigen::Vector3d& p,
   if (f.face < 0 || !std::isfinite(f.distance)) return out;
   const Eigen::Vector3d nf = face_normal(solid.mesh(), f.face);
   const Eigen::Vector3d v = p - f.point;
-  const double sign = v.dot(nf) < 0 ? -1.0 : 1.0;
+  const double sign = v.dot(solid.pseudo_normal(f)) < 0 ? -1.0 : 1.0;
   out.q = f.point;
   out.distance = sign * f.distance;
   out.g = f.distance > 1e-12 ? Eigen::Vector3d(sign * v / f.distance) : nf;

@@ -58,7 +58,7 @@ struct ToolRadius {
 // narrows the radii) away from the part instead of cutting it.
 struct CheckSurface {
   // Unset: no check surface. Its faces must be oriented out of the material (a closed part outward):
-  // the sign of a distance is that of <p - q, face normal>, and positive (outside) where the closest
+  // the sign of a distance is that of <p - q, pseudo-normal at q>, and positive (outside) where the closest
   // point lies on the part's boundary (the edge of the hole where Φ's twin was cut out).
   const SurfaceIndex* part = nullptr;
   // The whole part (closed, Φ's twin included), when `part` is it without the twin: a point is

@@ -439,3 +439,37 @@ TEST_CASE("the cell grid answers as brute force just inside and just beyond its 
   }
   CHECK(differ == 0);
 }
+
+TEST_CASE("the pseudo-normal tells outside from inside next to a knife edge, where the closest face's normal cannot") {
+  // A closed wedge 1 mm thick at its base and 20 mm high (a thin blade's edge, sides 1.4 degrees
+  // off each other's opposite), 60 mm long, faces outward.
+  TriMesh w;
+  w.vertices = {{0, 0, 0}, {1, 0, 0}, {0.5, 0, 20}, {0, 60, 0}, {1, 60, 0}, {0.5, 60, 20}};
+  w.faces = {{0, 1, 2}, {3, 5, 4}, {0, 3, 4}, {0, 4, 1}, {0, 2, 5}, {0, 5, 3}, {1, 4, 5}, {1, 5, 2}};
+  const SurfaceIndex index(w);
+  const Eigen::Vector3d apex(0.5, 30, 20);
+  int face_wrong = 0;
+  for (int deg = 5; deg <= 175; deg += 5) {  // around the apex edge, above the wedge: all outside
+    CAPTURE(deg);
+    const double a = deg * M_PI / 180;
+    const Eigen::Vector3d p = apex + 5 * Eigen::Vector3d(std::cos(a), 0, std::sin(a));
+    const Footpoint f = index.closest(p);
+    CHECK((f.point - apex).norm() < 1e-9);  // the closest point is on the edge
+    CHECK((p - f.point).dot(index.pseudo_normal(f)) > 0);
+    if ((p - f.point).dot(face_normal(w, f.face)) < 0) ++face_wrong;
+  }
+  CHECK(face_wrong > 0);  // the closest face's own normal calls some of them inside
+  // Inside, near the apex and near the base: the pseudo-normal says so.
+  for (const Eigen::Vector3d& p : {Eigen::Vector3d(0.5, 30, 19.5), Eigen::Vector3d(0.5, 30, 0.2), Eigen::Vector3d(0.9, 59.9, 0.1)}) {
+    CAPTURE(p.transpose());
+    const Footpoint f = index.closest(p);
+    CHECK((p - f.point).dot(index.pseudo_normal(f)) < 0);
+  }
+  // Beyond the apex's end corner (a vertex): outside, by the angle-weighted vertex normal.
+  const Eigen::Vector3d corner(0.5, 60, 20);
+  for (const Eigen::Vector3d& d : {Eigen::Vector3d(3, 3, 3), Eigen::Vector3d(-3, 3, 3), Eigen::Vector3d(0, 3, 0.5)}) {
+    const Footpoint f = index.closest(corner + d);
+    CHECK((f.point - corner).norm() < 1e-9);
+    CHECK(d.dot(index.pseudo_normal(f)) > 0);
+  }
+}
