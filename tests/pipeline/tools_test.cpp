@@ -391,7 +391,7 @@ TEST_CASE("passes: each pass is its own section of the patch's program, in order
   CHECK(r["passes"][1]["allowance_mm"] == 0);
 }
 
-TEST_CASE("patches: auto with tool: {shared: true}: one tool for every detected patch, said in report.json") {
+TEST_CASE("patches: auto with tool: {shared: true}: one tool for every detected patch, said in report.json" * doctest::test_suite("heavy")) {
   // Two separate flanks 25 mm apart, each the exact envelope of the same barrel tool under the arc
   // motion (the second turned half round about z, like a neighbouring blade's flank).
   test::ScratchDir dir("auto-shared");
