@@ -75,7 +75,7 @@ TopoDS_Face bore_face(const ExampleModelOptions& o) {
   return face;
 }
 
-std::string lower_extension(const std::string& path) {
+std::string lowercase_extension(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
   return ext;
@@ -98,7 +98,7 @@ std::string ExampleModelOptions::validate() const {
 
 void write_example_model(const std::string& path, const ExampleModelOptions& o) {
   if (std::string why = o.validate(); !why.empty()) throw InputError("example model: " + why);
-  const std::string ext = lower_extension(path);
+  const std::string ext = lowercase_extension(path);
   const bool step = ext == ".step" || ext == ".stp", iges = ext == ".iges" || ext == ".igs";
   if (!step && !iges) throw InputError(path + ": example model: write .step, .stp, .iges or .igs");
   BladeOptions bo = o.blade;

@@ -26,7 +26,7 @@ std::string PathOptions::validate() const {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-constexpr double kDeg = M_PI / 180;
+constexpr double kRadPerDeg = M_PI / 180;
 
 // Cosines and sines of a pose's rotary angles (the linearisation checks step from them).
 struct Trig {
@@ -34,7 +34,7 @@ struct Trig {
 };
 Trig trig_of(const std::array<double, 2>& deg) {
   Trig t;
-  for (size_t k = 0; k < 2; ++k) t.c[k] = std::cos(deg[k] * kDeg), t.s[k] = std::sin(deg[k] * kDeg);
+  for (size_t k = 0; k < 2; ++k) t.c[k] = std::cos(deg[k] * kRadPerDeg), t.s[k] = std::sin(deg[k] * kRadPerDeg);
   return t;
 }
 
@@ -186,7 +186,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   if (n == 0) return out;
 
   // Candidates per pose within the rotary limits (any turn), independent of the predecessor.
-  const double cos_singular = std::cos(o.singular_deg * kDeg);
+  const double cos_singular = std::cos(o.singular_deg * kRadPerDeg);
   PoseArray<Two<Candidate>> cand(static_cast<size_t>(n));
   PoseArray<Two<Rejection>> cand_linear(static_cast<size_t>(n));  // per candidate when linear_ok == 0
   // Cosines and sines of each candidate's angles when linear_ok >= 0 (apart: the serial Viterbi
@@ -361,7 +361,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   const PreparedForward fk = prepare_forward(m, o.tool_length_mm);
   // The checks sample each block at a few points; the error between them peaks a few percent higher
   // (measured up to 4%), so the blocks are held to 90% of the tolerance.
-  const double tip_tol2 = std::pow(0.9 * o.tolerance_mm, 2), cos_tol = std::cos(0.9 * o.angle_tolerance_deg * kDeg);
+  const double tip_tol2 = std::pow(0.9 * o.tolerance_mm, 2), cos_tol = std::cos(0.9 * o.angle_tolerance_deg * kRadPerDeg);
   // Nearest solution of an inserted pose to the joints before it (same unwinding).
   const auto nearest = [&](const ToolPose& p, const Joints& near) -> std::optional<Joints> {
     std::optional<Joints> best;
@@ -410,7 +410,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     const double g = 1.0 / (o.checks_per_block + 1);
     std::array<double, 2> dc{}, ds{};
     for (size_t k = 0; k < 2; ++k) {
-      const double step = (b.q.rotary[k] - a.q.rotary[k]) * g * kDeg;
+      const double step = (b.q.rotary[k] - a.q.rotary[k]) * g * kRadPerDeg;
       dc[k] = std::cos(step), ds[k] = std::sin(step);
     }
     Trig at = a.trig;

@@ -322,7 +322,7 @@ int steps_for(const std::function<ToolPose(double)>& at, double reach, double st
   return std::max(1, int(std::ceil(travel / step)));
 }
 
-bool same_rotaries(const Joints& a, const Joints& b) { return a.rotary == b.rotary; }
+bool same_rotary_angles(const Joints& a, const Joints& b) { return a.rotary == b.rotary; }
 
 void check_machine_axes(const Machine& m, const Joints& a, const Joints& b, double minutes, const SimBlock& sb,
                         VerifyReport& rep) {
@@ -530,7 +530,7 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
         // With the rotaries held the tip moves on a line: beyond the part's bounding sphere, grown by the
         // assembly and the report distance, nothing can be touched (the travel may be a long way up).
         double f_end = 1;
-        if (same_rotaries(from, to)) {
+        if (same_rotary_angles(from, to)) {
           const Eigen::Vector3d p0 = at(0).tip, d = at(1).tip - p0, c = p0 - part_centre;
           const double R = part_radius + old.assembly.total_length() + o.report_clearance_mm;
           const double a2 = d.squaredNorm(), b = c.dot(d), disc = b * b - a2 * (c.squaredNorm() - R * R);

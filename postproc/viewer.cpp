@@ -192,7 +192,7 @@ std::string jstr(const std::string& s) {
   }
   return o + "\"";
 }
-std::string num(double x) {
+std::string json_num(double x) {
   std::string s = fmt::format("{:.6f}", std::abs(x) < 5e-7 ? 0.0 : x);
   return s;
 }
@@ -229,7 +229,7 @@ std::string bands_b64(const std::vector<double>& dev, double tol) {
 
 std::string meridian_json(const std::vector<Eigen::Vector2d>& zr) {
   std::string s = "[";
-  for (size_t i = 0; i < zr.size(); ++i) s += fmt::format("{}[{},{}]", i ? "," : "", num(zr[i].x()), num(zr[i].y()));
+  for (size_t i = 0; i < zr.size(); ++i) s += fmt::format("{}[{},{}]", i ? "," : "", json_num(zr[i].x()), json_num(zr[i].y()));
   return s + "]";
 }
 
@@ -245,7 +245,7 @@ std::vector<size_t> kept_frames(size_t n, int max_frames, const std::set<size_t>
   return {all.begin(), all.end()};
 }
 
-std::string vec_json(const Eigen::Vector3d& v) { return fmt::format("[{},{},{}]", num(v.x()), num(v.y()), num(v.z())); }
+std::string vec_json(const Eigen::Vector3d& v) { return fmt::format("[{},{},{}]", json_num(v.x()), json_num(v.y()), json_num(v.z())); }
 
 // The chain as kinematics/kinematics.cpp applies it: rotary[0] outermost, tables about points in
 // part coordinates, heads about points relative to the head pivot (gauge length above the nose).
@@ -258,8 +258,8 @@ std::string machine_json(const ViewerMachine& vm) {
                      a.carries == Carrier::Table ? "true" : "false", vec_json(a.direction), vec_json(a.pivot));
   }
   j += fmt::format(R"(],"spindle":{},"gauge_length_mm":{},"tool_length_mm":[)", vec_json(m.spindle_direction),
-                   num(m.gauge_length_mm));
-  for (size_t k = 0; k < vm.tool_length_mm.size(); ++k) j += (k ? "," : "") + num(vm.tool_length_mm[k]);
+                   json_num(m.gauge_length_mm));
+  for (size_t k = 0; k < vm.tool_length_mm.size(); ++k) j += (k ? "," : "") + json_num(vm.tool_length_mm[k]);
   return j + "]}";
 }
 
@@ -277,7 +277,7 @@ std::string viewer_json(const ViewerScene& scene, const ViewerOptions& options) 
   const Decimated surface = decimate(scene.surface_mm, options.max_surface_triangles);
   const size_t nv = surface.mesh.vertices.size();
 
-  std::string j = fmt::format(R"({{"format":"flankcam-viewer 1","units":"mm","tolerance_mm":{},)", num(tol));
+  std::string j = fmt::format(R"({{"format":"flankcam-viewer 1","units":"mm","tolerance_mm":{},)", json_num(tol));
   j += "\n\"surface\":" + mesh_json(surface.mesh, scene.surface_mm.faces.size());
   // Φ after all patches (programs): each removes material up to its envelope, the smallest deviation stays.
   std::vector<double> all(scene.surface_mm.vertices.size(), std::nan(""));
@@ -365,8 +365,8 @@ std::string viewer_json(const ViewerScene& scene, const ViewerOptions& options) 
         }
         frames += fmt::format("{}{}", t ? "," : "", best);
       }
-      j += fmt::format(R"({}{{"at":[{},{},{}],"pose":{},"label":{},"frames":[{}]}})", m ? "," : "", num(mk.at_mm.x()),
-                       num(mk.at_mm.y()), num(mk.at_mm.z()), mk.pose, jstr(mk.label), frames);
+      j += fmt::format(R"({}{{"at":[{},{},{}],"pose":{},"label":{},"frames":[{}]}})", m ? "," : "", json_num(mk.at_mm.x()),
+                       json_num(mk.at_mm.y()), json_num(mk.at_mm.z()), mk.pose, jstr(mk.label), frames);
     }
     j += "]}";
   }

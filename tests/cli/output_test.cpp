@@ -17,7 +17,7 @@ using namespace flankcam;
 namespace fs = std::filesystem;
 
 namespace {
-const std::string kApt = std::string(TEST_DATA) + "/golden/small-patch.apt";
+const std::string kSmallPatchApt = std::string(TEST_DATA) + "/golden/small-patch.apt";
 
 int entries(const fs::path& dir) {
   int n = 0;
@@ -92,7 +92,7 @@ TEST_CASE("--out that is a file, under /proc or over-long: one line, exit 2, bef
       CHECK(r.err.find(c.message) != std::string::npos);
       CHECK(std::count(r.err.begin(), r.err.end(), '\n') == 1);
     }
-  const auto r = test::run_flankcam("post " + kApt + " --machine xyzac-trt --out /proc/flankcam-out", dir);
+  const auto r = test::run_flankcam("post " + kSmallPatchApt + " --machine xyzac-trt --out /proc/flankcam-out", dir);
   CHECK(r.code == 2);
   CHECK(r.err.find("is under /proc") != std::string::npos);
   CHECK(test::read_text(dir.file("plain")) == "x");
@@ -115,17 +115,17 @@ TEST_CASE("output names that clash or leave --out are refused with exit 2 and no
           "of all patches in order");
   fs::create_directories(dir.file("a"));
   fs::create_directories(dir.file("b"));
-  test::write_text(dir.file("a/x.apt"), test::read_text(kApt));
-  test::write_text(dir.file("b/x.apt"), test::read_text(kApt));
-  test::write_text(dir.file("all.apt"), test::read_text(kApt));
+  test::write_text(dir.file("a/x.apt"), test::read_text(kSmallPatchApt));
+  test::write_text(dir.file("b/x.apt"), test::read_text(kSmallPatchApt));
+  test::write_text(dir.file("all.apt"), test::read_text(kSmallPatchApt));
   refused("post " + dir.file("a/x.apt") + " " + dir.file("b/x.apt") + " --machine xyzac-trt",
           "output name clash: x.ngc would be written for the program of " + dir.file("a/x.apt") + " and for the program of " +
               dir.file("b/x.apt"));
   refused("post " + dir.file("all.apt") + " " + dir.file("a/x.apt") + " --machine xyzac-trt",
           "output name clash: all.ngc would be written for the program of " + dir.file("all.apt") +
               " and for the program of all files in order (--name)");
-  refused("post " + dir.file("a/x.apt") + " " + kApt + " --machine xyzac-trt --name ../x", "--name: '../x' starts with '.'");
-  refused("post " + dir.file("a/x.apt") + " " + kApt + " --machine xyzac-trt --name sub/x", "--name: 'sub/x' contains '/'");
+  refused("post " + dir.file("a/x.apt") + " " + kSmallPatchApt + " --machine xyzac-trt --name ../x", "--name: '../x' starts with '.'");
+  refused("post " + dir.file("a/x.apt") + " " + kSmallPatchApt + " --machine xyzac-trt --name sub/x", "--name: 'sub/x' contains '/'");
   // A different --name resolves the clash.
   const auto r = test::run_flankcam("post " + dir.file("all.apt") + " " + dir.file("a/x.apt") +
                                         " --machine xyzac-trt --name both --out " + dir.file("out"),
@@ -143,7 +143,7 @@ TEST_CASE("a planted symlink in an existing --out is replaced, never written thr
   for (const char* name : {"small-patch.ngc", "small-patch-tool.stl"})
     fs::create_symlink(dir.file("victim.txt"), dir.file(std::string("out/") + name));
   test::write_text(dir.file("out/mine.txt"), "kept");
-  const auto r = test::run_flankcam("post " + kApt + " --machine xyzac-trt --out " + dir.file("out"), dir);
+  const auto r = test::run_flankcam("post " + kSmallPatchApt + " --machine xyzac-trt --out " + dir.file("out"), dir);
   CHECK(r.code == 0);
   CHECK(test::read_text(dir.file("victim.txt")) == "precious");
   CHECK(!fs::is_symlink(dir.file("out/small-patch.ngc")));

@@ -21,7 +21,7 @@ TriMesh flank(int ny = 31, int nz = 11) {
 }
 
 // A closed box, faces outward; each side split into n x n squares.
-TriMesh box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n = 1) {
+TriMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n = 1) {
   TriMesh m;
   for (int axis = 0; axis < 3; ++axis)
     for (int side = 0; side < 2; ++side) {
@@ -103,7 +103,7 @@ struct Setup {
 TEST_CASE("a tool standing next to a wall tilts away instead of cutting it" * doctest::test_suite("heavy")) {
   Setup s;
   // The opposite wall at x >= 14 mm: the upright tool's holder (radius 10 about x = 5) reaches x = 15.
-  const SurfaceIndex wall(to_unit(box({14, -20, -10}, {30, 80, 100}, 4), s.fr));
+  const SurfaceIndex wall(to_unit(box_mesh({14, -20, -10}, {30, 80, 100}, 4), s.fr));
   // The tip keeps its Ø10 (a tool may not simply become thinner and move closer to the flank).
   s.o.constraints.min_tip_radius = s.fr.length_to_unit(4.9);
   s.o.constraints.max_cone_angle_rad = 15 * M_PI / 180;
@@ -135,7 +135,7 @@ TEST_CASE("a tool standing next to a wall tilts away instead of cutting it" * do
 TEST_CASE("a post in the cutter's way: the motion is kept clear of it or trimmed, and says why" * doctest::test_suite("heavy")) {
   Setup s;
   // A post at y >= 52 mm standing where the cutter (Ø10 about x = 5) would end its motion (y = 55).
-  const SurfaceIndex post(to_unit(box({1, 52, -10}, {30, 80, 100}, 4), s.fr));
+  const SurfaceIndex post(to_unit(box_mesh({1, 52, -10}, {30, 80, 100}, 4), s.fr));
   PatchOptions po = s.patch_options();
   po.fit.check.part = &post;
   po.fit.check.tolerance = s.fr.length_to_unit(0.005);
@@ -161,7 +161,7 @@ TEST_CASE("the part's twin of the design surface is left out of the check surfac
   const TriMesh phi_mm = flank(31, 11);
   const SurfaceIndex phi(phi_mm);
   // The blade block behind the flank: its x = 0 side is the flank's twin (4 x 4 squares: 32 triangles).
-  const TriMesh block = box({-10, 0, 0}, {0, 60, 20}, 4);
+  const TriMesh block = box_mesh({-10, 0, 0}, {0, 60, 20}, 4);
   const CheckPart cp = check_part(block, phi, 0.01);
   CHECK(cp.twin_faces == 32);
   CHECK(cp.mesh.faces.size() == block.faces.size() - 32);
@@ -175,7 +175,7 @@ TEST_CASE("the part's twin of the design surface is left out of the check surfac
   CHECK(turned.twin_faces == 32);
   CHECK(signed_volume(merged(turned.mesh, phi_mm)) > 0);  // closed again by the flank: outward
   // A face near the flank but across it (the other side of a thin edge) is kept.
-  const TriMesh thin = box({-0.005, 0, 0}, {0, 60, 20}, 4);
+  const TriMesh thin = box_mesh({-0.005, 0, 0}, {0, 60, 20}, 4);
   CHECK(check_part(thin, phi, 0.01).twin_faces == 32);
 }
 
@@ -222,7 +222,7 @@ TEST_CASE("shank and holder keep their clearance from the design surface too: a 
 }
 
 TEST_CASE("check surface options name the bad field") {
-  const SurfaceIndex wall(box({14, -20, -10}, {30, 80, 100}));
+  const SurfaceIndex wall(box_mesh({14, -20, -10}, {30, 80, 100}));
   FitOptions o;
   o.check.part = &wall;
   CHECK(o.validate().empty());
@@ -243,7 +243,7 @@ namespace {
 // The hub under the flank: a block below z = 0 whose top rises away from the flank, z = 0.3 x (mm),
 // so a flat tool end level with the flank's lower edge enters it (3 mm deep at x = 10).
 TriMesh sloping_hub() {
-  TriMesh hub = box({0, -20, -10}, {30, 80, 0}, 4);
+  TriMesh hub = box_mesh({0, -20, -10}, {30, 80, 0}, 4);
   for (Eigen::Vector3d& p : hub.vertices)
     if (p.z() > -1e-9) p.z() = 0.3 * p.x();
   return hub;
@@ -364,7 +364,7 @@ TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's 
   // (every mm) see it 4.015 mm away, outside the clearance; the trim grows them to enclose their
   // slabs of the shank (as the collision check samples it) and stops the motion before the fin.
   Setup s;
-  const TriMesh fin_mm = box({8.99, 40, 24.45}, {30, 80, 24.55}, 2);
+  const TriMesh fin_mm = box_mesh({8.99, 40, 24.45}, {30, 80, 24.55}, 2);
   const SurfaceIndex fin(to_unit(fin_mm, s.fr)), fin_index_mm(fin_mm);
   PatchOptions po = s.patch_options();
   po.fit.check.part = &fin;

@@ -359,7 +359,7 @@ TriMesh two_sheets(double gap) {
 }
 }  // namespace
 
-TEST_CASE("the cell grid answers as brute force on a 160k-face envelope: on the surface, at vertices and edges, and around its reach") {
+TEST_CASE("the cell grid answers as brute force on a 160k-face envelope: on the surface, at vertices and edges, and around its reach" * doctest::test_suite("heavy")) {
   // Over 131k faces: no local certificates, so every query on or next to the surface is settled by
   // its cell (reach: a tenth of a leaf's width, here about 5e-4) or by the tree after it.
   const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), 200, 400, 1);
@@ -418,7 +418,7 @@ TEST_CASE("closest points equal brute force on a mesh of tiny faces and a few hu
   CHECK(batch_differences(index, queries) == 0);
 }
 
-TEST_CASE("the cell grid answers as brute force just inside and just beyond its reach on a 26k-face envelope") {
+TEST_CASE("the cell grid answers as brute force just inside and just beyond its reach on a 26k-face envelope" * doctest::test_suite("heavy")) {
   // The reach is a tenth of a leaf's width (here about 5e-4): a query that far off the surface is
   // settled by its cell only if the cell lists every face that near, which the widening of each
   // face's box and plane by the reach ensures (without it, about one query in 400 here is wrong).

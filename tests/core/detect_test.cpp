@@ -290,7 +290,7 @@ void check_one_tool_two_flanks(const Detection& d, const TwoFlanks& tf) {
 }
 }  // namespace
 
-TEST_CASE("tool shared: two separate flanks of one barrel tool are covered by one tool in few patches") {
+TEST_CASE("tool shared: two separate flanks of one barrel tool are covered by one tool in few patches" * doctest::test_suite("heavy")) {
   // The arc's flank and the s-curve's, 25 mm apart. The first patch's custom tool is held for every
   // later candidate (motion only); the joint refit at the end is kept only if it covers as much.
   const TwoFlanks tf = two_flanks("arc", "s-curve", 40, 120);

@@ -10,7 +10,7 @@
 using namespace flankcam;
 
 namespace {
-Machine shipped(const std::string& name) { return load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/" + name + ".yaml"); }
+Machine shipped_machine(const std::string& name) { return load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/" + name + ".yaml"); }
 
 Eigen::Vector3d tilted(double tilt_deg, double azimuth_deg) {
   const double t = tilt_deg * M_PI / 180, a = azimuth_deg * M_PI / 180;
@@ -34,7 +34,7 @@ void check_reproduces(const Machine& m, const JointPath& p, double tool) {
 }  // namespace
 
 TEST_CASE("a continuous C axis is unwound over three turns: no 360 degree jumps, values beyond 360") {
-  const Machine m = shipped("xyzac-trt");
+  const Machine m = shipped_machine("xyzac-trt");
   std::vector<ToolPose> poses;
   for (int i = 0; i <= 360; ++i) poses.push_back({Eigen::Vector3d(50 * std::cos(i * M_PI / 60), 50 * std::sin(i * M_PI / 60), 10), tilted(30, 3.0 * i)});
   PathOptions o;
@@ -55,7 +55,7 @@ TEST_CASE("a continuous C axis is unwound over three turns: no 360 degree jumps,
 TEST_CASE("the IK branch is chosen per path: one branch covers the sweep, so it never flips") {
   for (const std::string name : {"xyzbc-trt", "xyzbc-head-table", "xyzca-head-head", "xyzbc-nutating"}) {
     CAPTURE(name);
-    const Machine m = shipped(name);
+    const Machine m = shipped_machine(name);
     std::vector<ToolPose> poses;
     for (int i = 0; i <= 200; ++i) poses.push_back({Eigen::Vector3d(-60 + 0.6 * i, 20, 5), tilted(25 + 15 * std::sin(i * 0.05), 40 + 0.4 * i)});
     PathOptions o;
@@ -70,7 +70,7 @@ TEST_CASE("the IK branch is chosen per path: one branch covers the sweep, so it 
 }
 
 TEST_CASE("through the singular pose the free angle stays continuous and the pose is reported") {
-  const Machine m = shipped("xyzac-trt");
+  const Machine m = shipped_machine("xyzac-trt");
   // The tool axis swings through the vertical (C free there) in the plane at azimuth 30 degrees.
   std::vector<ToolPose> poses;
   for (int i = -50; i <= 50; ++i) poses.push_back({Eigen::Vector3d(i, 0, 0), tilted(0.4 * i, 30)});
@@ -88,7 +88,7 @@ TEST_CASE("through the singular pose the free angle stays continuous and the pos
 }
 
 TEST_CASE("out of reach: a tilt beyond the A limits names the pose and the axis") {
-  const Machine m = shipped("xyzac-trt");  // A in [-120, 30]: the tool tilts up to 120 deg one way, 30 the other
+  const Machine m = shipped_machine("xyzac-trt");  // A in [-120, 30]: the tool tilts up to 120 deg one way, 30 the other
   std::vector<ToolPose> poses;
   for (int i = 0; i <= 20; ++i) poses.push_back({Eigen::Vector3d::Zero(), tilted(5.0 * i, 0)});
   poses.push_back({Eigen::Vector3d::Zero(), Eigen::Vector3d(0, 0, -1)});  // pointing up from below: A = 180
@@ -126,7 +126,7 @@ TEST_CASE("out of reach: a tilt beyond the A limits names the pose and the axis"
 TEST_CASE("linearisation keeps every intermediate tip within the tolerance through large rotary moves") {
   for (const std::string name : {"xyzac-trt", "xyzbc-head-table", "xyzca-head-head", "xyzbc-nutating"}) {
     CAPTURE(name);
-    const Machine m = shipped(name);
+    const Machine m = shipped_machine(name);
     // 8 poses only: tilt 0 -> 28 deg while the azimuth turns 150 deg, tip on a line 100 mm off the pivots.
     const IntendedMotion motion = [](double t) {
       return ToolPose{Eigen::Vector3d(100 + 40 * t, -30 + 60 * t, 20), tilted(1 + 27 * t, 150 * t)};
@@ -160,7 +160,7 @@ TEST_CASE("linearisation keeps every intermediate tip within the tolerance throu
 }
 
 TEST_CASE("inverse-time feed: the programmed tip feed unless an axis would exceed its maximum speed") {
-  const Machine m = shipped("xyzac-trt");
+  const Machine m = shipped_machine("xyzac-trt");
   std::vector<ToolPose> poses = {{Eigen::Vector3d(0, 0, 0), Eigen::Vector3d::UnitZ()},
                                  {Eigen::Vector3d(10, 0, 0), Eigen::Vector3d::UnitZ()},
                                  {Eigen::Vector3d(10.1, 0, 0), tilted(30, 90)}};
@@ -180,7 +180,7 @@ TEST_CASE("inverse-time feed: the programmed tip feed unless an axis would excee
 }
 
 TEST_CASE("passing close to the singular pose: C swings fast there and the feed is slowed by C's speed limit") {
-  const Machine m = shipped("xyzac-trt");
+  const Machine m = shipped_machine("xyzac-trt");
   // The axis passes 0.2 deg beside the vertical: the azimuth, and so C, turns 180 deg within a few poses.
   std::vector<ToolPose> poses;
   for (int i = -40; i <= 40; ++i) {
@@ -210,7 +210,7 @@ TEST_CASE("programmed coordinates: tip and angles with TCP, machine joints witho
   const ToolPose pose{Eigen::Vector3d(12, -7, 3), tilted(20, 45)};
   for (const std::string name : {"xyzac-trt", "xyzbc-head-table"}) {
     CAPTURE(name);
-    const Machine m = shipped(name);
+    const Machine m = shipped_machine(name);
     const Joints q = inverse(m, pose, 90).front();
     const Joints p = programmed(m, q, pose);
     CHECK(p.rotary == q.rotary);
@@ -224,7 +224,7 @@ TEST_CASE("programmed coordinates: tip and angles with TCP, machine joints witho
 
 TEST_CASE("solve_path breaks a tie between mirror branches the same way whatever the round-off") {
   // A tilted axis turning about Z: both A/C branches (A, C) and (-A, C + 180) travel exactly alike.
-  const Machine m = shipped("xyzac-trt");
+  const Machine m = shipped_machine("xyzac-trt");
   for (double noise : {0.0, 1e-13, -1e-13}) {
     CAPTURE(noise);
     std::vector<ToolPose> poses;
@@ -240,7 +240,7 @@ TEST_CASE("solve_path breaks a tie between mirror branches the same way whatever
 }
 
 TEST_CASE("solve_path gives the same joints, inserted poses and singular poses on 1 and 2 threads") {
-  const Machine m = shipped("xyzac-trt");
+  const Machine m = shipped_machine("xyzac-trt");
   // Coarse poses (the linearisation inserts) passing near the singular A = 0.
   const IntendedMotion motion = [](double t) {
     return ToolPose{Eigen::Vector3d(-100 + 200 * t, 20 * std::sin(3 * t), 10), tilted(0.2 + 20 * t, 400 * t)};
@@ -276,7 +276,7 @@ TEST_CASE("a tilt of 100 degrees on an A table limited to [-120, 30]: one branch
   // must not take it because its unset angle (0) sits nearer the middle of A's range (-45) than -100
   // does; the HECC impeller's flank set up upside down (A near -109) once got joints that were not
   // numbers from that.
-  const Machine m = shipped("xyzac-trt");
+  const Machine m = shipped_machine("xyzac-trt");
   for (double azimuth : {0.0, 90.0, 180.0, 270.0, 33.0}) {
     CAPTURE(azimuth);
     std::vector<ToolPose> poses;

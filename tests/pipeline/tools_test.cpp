@@ -60,7 +60,7 @@ int count_m6(const std::string& text) {
   for (size_t at = text.find("M6"); at != std::string::npos; at = text.find("M6", at + 1)) ++n;
   return n;
 }
-std::string error_of(const test::ScratchDir& dir, const std::string& yaml) {
+std::string tools_error_of(const test::ScratchDir& dir, const std::string& yaml) {
   test::write_text(dir.file("job.yaml"), yaml);
   return test::job_error(dir.file("job.yaml"));
 }
@@ -144,14 +144,14 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
   };
   for (const auto& c : cases) {
     CAPTURE(c.tool);
-    const std::string msg = error_of(dir, std::string(c.tool) + "\n" + rest);
+    const std::string msg = tools_error_of(dir, std::string(c.tool) + "\n" + rest);
     CAPTURE(msg);
     CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
   }
   for (const char* key : {"allowance: 0.2", "passes: [{allowance: 0.2}, {allowance: 0}]", "tool: {catalogue: cyl-d6-l20}",
                           "tool: {catalogue: cyl-d6-l20, shared: true}"}) {
     CAPTURE(key);
-    const std::string msg = error_of(dir, std::string(key) + "\nsurface: s.obj\npatches: auto\n");
+    const std::string msg = tools_error_of(dir, std::string(key) + "\nsurface: s.obj\npatches: auto\n");
     CAPTURE(msg);
     CHECK(msg.find(dir.file("job.yaml") + ":1: ") != std::string::npos);
     CHECK(msg.find("not with patches: auto") != std::string::npos);
@@ -165,7 +165,7 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
     CHECK(j.tool.shared);
     CHECK(!j.tool.catalogue);
   }
-  CHECK(error_of(dir, "tool: {catalogue: cyl-d6-l20}\nsurface: s.obj\npatches: auto\n").find("tool: {shared: true} for one custom tool") !=
+  CHECK(tools_error_of(dir, "tool: {catalogue: cyl-d6-l20}\nsurface: s.obj\npatches: auto\n").find("tool: {shared: true} for one custom tool") !=
         std::string::npos);
   const pipeline::Job ok = [&] {
     test::write_text(dir.file("job.yaml"), "tool: {catalogue: barrel-d16-r150-l40, shared: true}\nallowance: 0.3\n" + rest);
@@ -391,7 +391,7 @@ TEST_CASE("passes: each pass is its own section of the patch's program, in order
   CHECK(r["passes"][1]["allowance_mm"] == 0);
 }
 
-TEST_CASE("patches: auto with tool: {shared: true}: one tool for every detected patch, said in report.json") {
+TEST_CASE("patches: auto with tool: {shared: true}: one tool for every detected patch, said in report.json" * doctest::test_suite("heavy")) {
   // Two separate flanks 25 mm apart, each the exact envelope of the same barrel tool under the arc
   // motion (the second turned half round about z, like a neighbouring blade's flank).
   test::ScratchDir dir("auto-shared");

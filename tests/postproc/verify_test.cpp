@@ -18,7 +18,7 @@ using namespace flankcam;
 
 namespace {
 
-Machine shipped(const std::string& name) { return load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/" + name + ".yaml"); }
+Machine shipped_machine(const std::string& name) { return load_machine(std::string(FLANKCAM_SOURCE_DIR) + "/machines/" + name + ".yaml"); }
 
 // The wall of a tool with meridian r moving along y (y in [-40, 40]).
 TriMesh wall(const std::function<double(double)>& r) { return test::flank_wall(r, 40, 80, 40); }
@@ -52,18 +52,18 @@ ToolAssembly holder() {
   return a;
 }
 
-struct Case {
+struct VerifyCase {
   std::string label;
   Machine machine;
   Dialect dialect;
 };
-std::vector<Case> cases() {
-  return {{"xyzac-trt", shipped("xyzac-trt"), Dialect::LinuxCnc},
-          {"xyzbc-trt", shipped("xyzbc-trt"), Dialect::Iso},
-          {"xyzbc-trt-sinumerik", shipped("xyzbc-trt"), Dialect::Sinumerik},
-          {"xyzbc-head-table", shipped("xyzbc-head-table"), Dialect::Iso},
-          {"xyzca-head-head", shipped("xyzca-head-head"), Dialect::Heidenhain},
-          {"xyzbc-nutating", shipped("xyzbc-nutating"), Dialect::Sinumerik}};
+std::vector<VerifyCase> verify_cases() {
+  return {{"xyzac-trt", shipped_machine("xyzac-trt"), Dialect::LinuxCnc},
+          {"xyzbc-trt", shipped_machine("xyzbc-trt"), Dialect::Iso},
+          {"xyzbc-trt-sinumerik", shipped_machine("xyzbc-trt"), Dialect::Sinumerik},
+          {"xyzbc-head-table", shipped_machine("xyzbc-head-table"), Dialect::Iso},
+          {"xyzca-head-head", shipped_machine("xyzca-head-head"), Dialect::Heidenhain},
+          {"xyzbc-nutating", shipped_machine("xyzbc-nutating"), Dialect::Sinumerik}};
 }
 
 struct Posting {
@@ -71,7 +71,7 @@ struct Posting {
   std::string text;
   std::vector<VerifyTool> tools;
 };
-Posting post_wall(const Case& c, const SurfaceIndex& part, const std::function<double(double)>& r, const Eigen::Vector3d& origin) {
+Posting post_wall(const VerifyCase& c, const SurfaceIndex& part, const std::function<double(double)>& r, const Eigen::Vector3d& origin) {
   PostOptions o;
   o.dialect = c.dialect;
   o.path.tool_length_mm = 80;
@@ -126,7 +126,7 @@ std::string lower_z(const std::string& line) {
 TEST_CASE("every shipped machine and dialect: the posted wall pass back-simulates clean, links clear of the part") {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cone), origin));
-  for (const Case& c : cases()) {
+  for (const VerifyCase& c : verify_cases()) {
     CAPTURE(c.label);
     const Posting p = post_wall(c, part, cone, origin);
     CHECK(p.posted.links_checked);
@@ -151,7 +151,7 @@ TEST_CASE("every shipped machine and dialect: the posted wall pass back-simulate
 TEST_CASE("a cutting block with Z lowered by 1 mm is a gouge on exactly that line, in every dialect" * doctest::test_suite("heavy")) {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cone), origin));
-  for (const Case& c : cases()) {
+  for (const VerifyCase& c : verify_cases()) {
     CAPTURE(c.label);
     const Posting p = post_wall(c, part, cone, origin);
     const std::vector<NcPoint> pts = parse_nc(p.text, c.dialect, p.posted.program.rotary_names, "wall");
@@ -175,7 +175,7 @@ TEST_CASE("a cutting block with Z lowered by 1 mm is a gouge on exactly that lin
 TEST_CASE("a rapid through the part is a collision on its line") {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cone), origin));
-  const Case c = cases()[1];  // xyzbc-trt, iso: joints
+  const VerifyCase c = verify_cases()[1];  // xyzbc-trt, iso: joints
   const Posting p = post_wall(c, part, cone, origin);
   const std::vector<NcPoint> pts = parse_nc(p.text, c.dialect, p.posted.program.rotary_names, "wall");
   // Replace the first lead-in feed block's line by a rapid that crosses the wall (x + 20).
@@ -204,7 +204,7 @@ TEST_CASE("hourglass tool: the CL-data's axial lead-in gouges the finished flank
   for (const VerifyHit& h : axial.hits) deepest = std::max(deepest, h.depth_mm);
   MESSAGE("axial lead-in of an hourglass tool: " << axial.first_problem("wall.apt"));
   CHECK(deepest > 0.1);
-  for (const Case& c : cases()) {
+  for (const VerifyCase& c : verify_cases()) {
     CAPTURE(c.label);
     const Posting p = post_wall(c, part, hourglass, origin);
     CHECK(p.posted.refused.empty());
@@ -216,7 +216,7 @@ TEST_CASE("hourglass tool: the CL-data's axial lead-in gouges the finished flank
 TEST_CASE("the machined design surface: the wall is reached and within tolerance where the pass runs") {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cone), origin));
-  const Case c = cases()[1];
+  const VerifyCase c = verify_cases()[1];
   const Posting p = post_wall(c, part, cone, origin);
   const VerifyReport rep = verify_text(p.text, c.dialect, "wall", c.machine, part, p.tools, {}, &part);
   CHECK(rep.design.reached > 0);
@@ -234,7 +234,7 @@ TEST_CASE("the machined design surface: the wall is reached and within tolerance
 }
 
 TEST_CASE("post without a part says that links were not checked, and refusals name the key") {
-  const Case c = cases()[1];
+  const VerifyCase c = verify_cases()[1];
   PostOptions o;
   o.dialect = c.dialect;
   const Posted p = post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, c.machine, o, "WALL", {});
@@ -246,7 +246,7 @@ TEST_CASE("post without a part says that links were not checked, and refusals na
   o.dialect = Dialect::LinuxCnc;
   o.path.tool_length_mm = 80;
   try {
-    (void)post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped("xyzbc-head-table"), o, "WALL", {});
+    (void)post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped_machine("xyzbc-head-table"), o, "WALL", {});
     FAIL("linuxcnc on a TCP head machine was accepted");
   } catch (const InputError& e) {
     const std::string what = e.what();
@@ -254,7 +254,7 @@ TEST_CASE("post without a part says that links were not checked, and refusals na
     CHECK(what.find("linuxcnc_trt") == std::string::npos);
   }
   // linuxcnc_trt on a head machine is refused.
-  Machine head = shipped("xyzbc-head-table");
+  Machine head = shipped_machine("xyzbc-head-table");
   head.controller.linuxcnc_trt = true;
   CHECK_THROWS_AS((void)post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, head, o, "WALL", {}), MachineError);
 }
@@ -263,11 +263,11 @@ TEST_CASE("the tool-change comment gives the length the program is posted with")
   PostOptions o;
   o.dialect = Dialect::Iso;
   o.path.tool_length_mm = 122.109;
-  const Posted head = post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped("xyzbc-head-table"), o, "W", {});
+  const Posted head = post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped_machine("xyzbc-head-table"), o, "W", {});
   const std::string text = nc_text(head.program, {Dialect::Iso, false, 0.005});
   CHECK(text.find(" L122.109)") != std::string::npos);
   // Table-table: the tool length does not enter the kinematics; the comment keeps the cutter's (25 mm).
-  const Posted trt = post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped("xyzbc-trt"), o, "W", {});
+  const Posted trt = post({{pass(cone, Eigen::Vector3d(30, 10, -5)), "wall", 0, {}}}, shipped_machine("xyzbc-trt"), o, "W", {});
   CHECK(nc_text(trt.program, {Dialect::Iso, false, 0.005}).find(" L25.000)") != std::string::npos);
 }
 
@@ -283,7 +283,7 @@ std::vector<ClReference> wall_cl(const std::function<double(double)>& r, const E
 TEST_CASE("every shipped machine and dialect: the posted wall pass lies on its CL-data, the planned leads excepted") {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cylinder), origin));
-  for (const Case& c : cases()) {
+  for (const VerifyCase& c : verify_cases()) {
     CAPTURE(c.label);
     const Posting p = post_wall(c, part, cylinder, origin);
     const VerifyReport rep = verify_text(p.text, c.dialect, "wall", c.machine, part, p.tools, {}, nullptr, wall_cl(cylinder, origin));
@@ -300,7 +300,7 @@ TEST_CASE("a cylinder's cutting block lowered 1 mm along its axis cuts nothing n
   // The tool slides along its own axis: the geometric sweep cannot see it, the CL-data can.
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cylinder), origin));
-  for (const Case& c : cases()) {
+  for (const VerifyCase& c : verify_cases()) {
     CAPTURE(c.label);
     const Posting p = post_wall(c, part, cylinder, origin);
     const std::vector<NcPoint> pts = parse_nc(p.text, c.dialect, p.posted.program.rotary_names, "wall");
@@ -323,7 +323,7 @@ TEST_CASE("a cylinder's cutting block lowered 1 mm along its axis cuts nothing n
 TEST_CASE("a lead-out whose end is moved off the surface normal is off the CL-data") {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cylinder), origin));
-  const Case c = cases()[3];  // xyzbc-head-table, iso, TCP
+  const VerifyCase c = verify_cases()[3];  // xyzbc-head-table, iso, TCP
   const Posting p = post_wall(c, part, cylinder, origin);
   const std::vector<NcPoint> pts = parse_nc(p.text, c.dialect, p.posted.program.rotary_names, "wall");
   int last_feed = 0;
@@ -338,7 +338,7 @@ TEST_CASE("a lead-out whose end is moved off the surface normal is off the CL-da
 namespace {
 // xyzac-trt changing tools at X 34 (the wall's plane, work x = 34) and the given Z and A.
 Machine swinging(std::optional<double> tc_z, std::optional<double> tc_a) {
-  Machine m = shipped("xyzac-trt");
+  Machine m = shipped_machine("xyzac-trt");
   m.tool_change.joints[0] = 34;
   m.tool_change.joints[2] = tc_z;
   m.tool_change.joints[3] = tc_a;
@@ -411,7 +411,7 @@ TEST_CASE("a tool change that plunges into the part is refused, naming the block
 }
 
 TEST_CASE("machine files: tool_change takes joint values by axis name within the limits") {
-  CHECK_FALSE(shipped("xyzac-trt").tool_change.joints[2].has_value());  // default: Z to the top of its travel
+  CHECK_FALSE(shipped_machine("xyzac-trt").tool_change.joints[2].has_value());  // default: Z to the top of its travel
   test::ScratchDir dir("toolchange");
   const std::string base = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/machines/xyzac-trt.yaml");
   const std::string file = dir.file("m.yaml");
@@ -438,7 +438,7 @@ TEST_CASE("a part whose coarse twin of the flank stands 0.03 mm proud: judged ap
     return test::grid_mesh(9, 9, [&](int i, int j) { return Eigen::Vector3d(origin + Eigen::Vector3d(-10 + 5.0 * i, -40 + 10.0 * j, z)); });
   };
   const SurfaceIndex design(design_mesh);
-  const Case c = cases()[1];
+  const VerifyCase c = verify_cases()[1];
   const Posting p = post_wall(c, design, cone, origin);
   REQUIRE(p.posted.refused.empty());
   for (const double hub : {-1.0, 0.05}) {
