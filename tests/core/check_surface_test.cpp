@@ -186,7 +186,7 @@ TEST_CASE("shank and holder keep their clearance from the design surface too: a 
   const TriMesh phi_mm = test::grid_mesh(31, 51, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * j, 2.0 * k); });
   const Similarity fr = unit_diagonal_frame(phi_mm);
   const SurfaceIndex phi(transformed(phi_mm, fr));
-  const TriMesh block = transformed(box({-10, 0, 0}, {0, 60, 100}, 4), fr);
+  const TriMesh block = transformed(box_mesh({-10, 0, 0}, {0, 60, 100}, 4), fr);
   const CheckPart cp = check_part(block, phi, fr.length_to_unit(0.01));
   REQUIRE(cp.twin_faces == 32);
   const SurfaceIndex part(cp.mesh), solid(block);
