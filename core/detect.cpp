@@ -493,6 +493,16 @@ Rails held_tool_start(const SurfaceIndex& surface, const Rails& r, const CoverOp
   return error(turned) < error(c) ? turned : c;
 }
 
+// The share of Φ's area a fit brings within tolerance that is not covered yet.
+double gain_of(const PatchFit& f, const std::vector<char>& covered, const std::vector<double>& area, double tol) {
+  double g = 0;
+  for (size_t v = 0; v < area.size(); ++v) {
+    const double d = f.machined.design_deviation[v];
+    if (!covered[v] && std::isfinite(d) && std::abs(d) <= tol) g += area[v];
+  }
+  return g;
+}
+
 // One candidate fitted, machined and trimmed where it gouges; its gain is the uncovered area it
 // brings within tolerance. From the trajectory, or from `start` (rails of an earlier fit).
 Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, const std::vector<char>& covered,
@@ -515,23 +525,11 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   // With a check surface: kept out of the part (with_check), rejected when no stretch keeps clear.
   out.fit = po.fit.check.part ? with_check(surface, std::move(out.fit), po) : machine_and_trim(surface, std::move(out.fit), po);
   if (!machinable(out.fit)) return out;  // no tool, or cannot be trimmed clean: rejected
-  for (size_t v = 0; v < area.size(); ++v) {
-    const double d = out.fit.machined.design_deviation[v];
-    if (!covered[v] && std::isfinite(d) && std::abs(d) <= po.tolerance) out.gain += area[v];
-  }
+  out.gain = gain_of(out.fit, covered, area, po.tolerance);
   out.ok = true;
   return out;
 }
 
-// The share of Φ's area a fit brings within tolerance that is not covered yet.
-double gain_of(const PatchFit& f, const std::vector<char>& covered, const std::vector<double>& area, double tol) {
-  double g = 0;
-  for (size_t v = 0; v < area.size(); ++v) {
-    const double d = f.machined.design_deviation[v];
-    if (!covered[v] && std::isfinite(d) && std::abs(d) <= tol) g += area[v];
-  }
-  return g;
-}
 
 }  // namespace
 

@@ -652,12 +652,18 @@ struct CheckDistance {
   double distance = INFINITY;
   Eigen::Vector3d g = Eigen::Vector3d::Zero(), q = Eigen::Vector3d::Zero();
 };
-CheckDistance check_distance(const CheckSurface& c, const Eigen::Vector3d& p, const Footpoint& f, const Footpoint* whole) {
+// The footpoint f of p on `mesh` as a signed distance (sign: -1 inside) with its gradient.
+CheckDistance signed_at(const SurfaceIndex& mesh, const Eigen::Vector3d& p, const Footpoint& f, double sign) {
   CheckDistance out;
+  out.q = f.point;
+  out.distance = sign * f.distance;
+  out.g = f.distance > 1e-12 ? Eigen::Vector3d(sign * (p - f.point) / f.distance) : face_normal(mesh.mesh(), f.face);
+  return out;
+}
+
+CheckDistance check_distance(const CheckSurface& c, const Eigen::Vector3d& p, const Footpoint& f, const Footpoint* whole) {
   const SurfaceIndex& part = *c.part;
-  if (f.face < 0 || !std::isfinite(f.distance)) return out;
-  const Eigen::Vector3d nf = face_normal(part.mesh(), f.face);
-  const Eigen::Vector3d v = p - f.point;
+  if (f.face < 0 || !std::isfinite(f.distance)) return {};
   double sign = 1;
   if (c.solid && whole && whole->face >= 0) {
     // Inside is decided by the whole part (closed, with Φ's twin): more than the tolerance inside it;
@@ -669,12 +675,9 @@ CheckDistance check_distance(const CheckSurface& c, const Eigen::Vector3d& p, co
   } else {
     // The sign is that of the pseudo-normal at the closest point, except at the part's boundary (where a
     // point in front of a hole is outside though the face normal next to its edge may say otherwise).
-    sign = !f.on_boundary && v.dot(part.pseudo_normal(f)) < 0 ? -1.0 : 1.0;
+    sign = !f.on_boundary && (p - f.point).dot(part.pseudo_normal(f)) < 0 ? -1.0 : 1.0;
   }
-  out.q = f.point;
-  out.distance = sign * f.distance;
-  out.g = f.distance > 1e-12 ? Eigen::Vector3d(sign * v / f.distance) : nf;
-  return out;
+  return signed_at(part, p, f, sign);
 }
 
 // Shank and holder keep their clearance from the whole part, Φ's twin included: only the cutter is
@@ -683,30 +686,29 @@ CheckDistance check_distance(const CheckSurface& c, const Eigen::Vector3d& p, co
 // shank 0.3-0.7 mm into the blade it cuts, found only by the collision check). The twin's chords
 // stand off Φ by at most its sag, far below any clearance.
 CheckDistance body_distance(const SurfaceIndex& solid, const Eigen::Vector3d& p, const Footpoint& f) {
-  CheckDistance out;
-  if (f.face < 0 || !std::isfinite(f.distance)) return out;
-  const Eigen::Vector3d nf = face_normal(solid.mesh(), f.face);
-  const Eigen::Vector3d v = p - f.point;
-  const double sign = v.dot(solid.pseudo_normal(f)) < 0 ? -1.0 : 1.0;
-  out.q = f.point;
-  out.distance = sign * f.distance;
-  out.g = f.distance > 1e-12 ? Eigen::Vector3d(sign * v / f.distance) : nf;
-  return out;
+  if (f.face < 0 || !std::isfinite(f.distance)) return {};
+  return signed_at(solid, p, f, (p - f.point).dot(solid.pseudo_normal(f)) < 0 ? -1.0 : 1.0);
 }
 
-// Footpoints of the check samples of one motion on the part.
+// Footpoints of the check samples of one motion on the part: the cutter's on the part without Φ's
+// twin (and on the whole part for the sign), shank and holder on the whole part alone when there is one.
 std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c, const std::vector<CheckSample>& samples,
                                            int m) {
   std::vector<Eigen::Vector3d> pts;
   pts.reserve(samples.size());
   for (const CheckSample& cs : samples) pts.push_back(r.point(double(cs.i) / (m - 1), cs.s) + cs.shift);
-  const std::vector<Footpoint> fps = c.part->closest(pts);
+  const auto on_part = [&](size_t k) { return !(samples[k].body && c.solid); };
+  std::vector<Eigen::Vector3d> part_pts;
+  part_pts.reserve(pts.size());
+  for (size_t k = 0; k < pts.size(); ++k)
+    if (on_part(k)) part_pts.push_back(pts[k]);
+  const std::vector<Footpoint> fps = c.part->closest(part_pts);
   std::vector<Footpoint> whole;
   if (c.solid) whole = c.solid->closest(pts);
   std::vector<CheckDistance> out(samples.size());
-  for (size_t k = 0; k < samples.size(); ++k)
-    out[k] = samples[k].body && c.solid ? body_distance(*c.solid, pts[k], whole[k])
-                                        : check_distance(c, pts[k], fps[k], c.solid ? &whole[k] : nullptr);
+  for (size_t k = 0, i = 0; k < samples.size(); ++k)
+    out[k] = on_part(k) ? check_distance(c, pts[k], fps[i++], c.solid ? &whole[k] : nullptr)
+                        : body_distance(*c.solid, pts[k], whole[k]);
   return out;
 }
 }  // namespace

@@ -241,19 +241,19 @@ flankcam::TriMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi)
 }
 }  // namespace
 
+namespace {
+// One patch along the flank x = 0 of the tests below: upright axis lines 5 mm off it, y 5..50.
+const std::string kFlankPatch =
+    "patches:\n  - name: flank\n    init: lines\n    lines:\n"
+    "      - [5, 5, 0, 5, 5, 20]\n      - [5, 20, 0, 5, 20, 20]\n      - [5, 35, 0, 5, 35, 20]\n      - [5, 50, 0, 5, 50, 20]\n";
+}  // namespace
+
 TEST_CASE("flankcam fit with a part: the part's twin of the flank is left to the flank, and a post in the way trims the motion" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("cli-fit-check");
   // The flank x = 0 (y 0..60, z 0..20 mm, normals +x); the part: the blade behind it, whose flank
   // side is the flank's twin, and a post at y >= 52 standing where the tool (Ø10 about x = 5) would
   // end its motion.
-  flankcam::TriMesh flank;
-  for (int k = 0; k <= 10; ++k)
-    for (int j = 0; j <= 30; ++j) flank.vertices.emplace_back(0, 2.0 * j, 2.0 * k);
-  for (int k = 0; k < 10; ++k)
-    for (int j = 0; j < 30; ++j) {
-      const int v = k * 31 + j;
-      flank.faces.push_back({v, v + 1, v + 32}), flank.faces.push_back({v, v + 32, v + 31});
-    }
+  const flankcam::TriMesh flank = test::grid_mesh(31, 11, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * j, 2.0 * k); });
   test::write_text(dir.file("flank.obj"), obj_text(flank));
   flankcam::TriMesh part = box_mesh({-10, 0, 0}, {0, 60, 20});
   const flankcam::TriMesh post = box_mesh({1, 52, -10}, {30, 80, 100});
@@ -266,9 +266,8 @@ TEST_CASE("flankcam fit with a part: the part's twin of the flank is left to the
       "part: part.obj\n"
       "check_tolerance: 0.001\n"
       "tool: {shape: general}\n"
-      "tolerance: 0.005\n"
-      "patches:\n  - name: flank\n    init: lines\n    lines:\n"
-      "      - [5, 5, 0, 5, 5, 20]\n      - [5, 20, 0, 5, 20, 20]\n      - [5, 35, 0, 5, 35, 20]\n      - [5, 50, 0, 5, 50, 20]\n";
+      "tolerance: 0.005\n" +
+      kFlankPatch;
   test::write_text(dir.file("job.yaml"), job);
   const test::RunResult run = test::run_flankcam("fit " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
   // The twin is left out (the flank is judged with the fitted tolerance); the post is kept clear of.
@@ -316,9 +315,8 @@ TEST_CASE("flankcam run with a part whose coarse twin of a dished flank stands 0
       "tool: {shape: cylinder}\n"
       "tolerance: 0.005\n"
       "machine: xyzac-trt\n"
-      "post: {dialects: [linuxcnc]}\n"
-      "patches:\n  - name: flank\n    init: lines\n    lines:\n"
-      "      - [5, 5, 0, 5, 5, 20]\n      - [5, 20, 0, 5, 20, 20]\n      - [5, 35, 0, 5, 35, 20]\n      - [5, 50, 0, 5, 50, 20]\n";
+      "post: {dialects: [linuxcnc]}\n" +
+      kFlankPatch;
   test::write_text(dir.file("job.yaml"), job);
   const test::RunResult run = test::run_flankcam("run " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
   REQUIRE_MESSAGE(run.code == 0, run.err);
