@@ -399,7 +399,8 @@ TEST_CASE("the cell grid answers as brute force where two sheets are closer than
   CHECK(batch_differences(index, queries) == 0);
 }
 
-TEST_CASE("closest points equal brute force on a mesh of tiny faces and a few huge ones (coarsened or no cell grid)") {
+TEST_CASE("closest points equal brute force on a mesh of tiny faces and a few huge ones (coarsened or no cell grid)" *
+          doctest::test_suite("heavy")) {
   // A 60 x 60 grid of 0.01-wide faces under three triangles 100 wide: the huge faces would fill
   // thousands of cells the size of a tiny leaf, so the grid is coarsened or left out; either way
   // the answers are brute force's.
