@@ -300,6 +300,15 @@ ToolRadius initial_tool(const SurfaceIndex& surface, const Rails& rails, const F
   return tool;
 }
 
+std::vector<Eigen::Vector2d> cutter_spheres(const ToolRadius& tool, double length, int points) {
+  std::vector<Eigen::Vector2d> out;
+  for (int j = 0; j < points; ++j) {
+    const double s = double(j) / (points - 1);
+    out.emplace_back(length * s, tool.d(s));
+  }
+  return out;
+}
+
 std::vector<Eigen::Vector2d> meridian(const ToolRadius& tool, double length, int points) {
   const RadiusProfile p = tool.profile();
   std::vector<Eigen::Vector2d> out;

@@ -202,6 +202,9 @@ struct ErrorStats {
 // The half-meridian in the tool's own frame (z along a->b from a, r radial): the planar
 // envelope of the circles (z, d(z)); unit frame.
 [[nodiscard]] std::vector<Eigen::Vector2d> meridian(const ToolRadius& tool, double length, int points = 61);
+// The cutter as the collision check takes it (ToolAssembly::cutter): the spheres (z, d(z / length)) at
+// `points` uniform z from the tip end (s = 0) to `length`.
+[[nodiscard]] std::vector<Eigen::Vector2d> cutter_spheres(const ToolRadius& tool, double length, int points = 61);
 
 // Where the radii d(s) over an axis of `length` describe no tool of revolution: a sphere radius
 // d <= 0, a slope |d'(z)| >= 1 (the circles nest inside each other: no meridian touches them all), or

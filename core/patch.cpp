@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "core/collision.h"
 #include "core/errors.h"
 
 namespace flankcam {
@@ -97,12 +98,65 @@ std::pair<double, double> longest_run(const std::vector<char>& ok) {
   return {double(best_lo) / (n - 1), double(best_lo + best_len - 1) / (n - 1)};
 }
 
-// The rows (as many as Ω's) where the tool keeps out of the check surface, and the worst row.
-std::vector<char> clear_rows(const PatchFit& f, const PatchOptions& o, CheckProfile& profile) {
+// The cutter at each of Ω's rows judged as the collision check judges the program (check_collisions
+// on the poses at t_i = i / (rows - 1), the motion between them subdivided by half of `step`): per row,
+// the deepest cutter hit into `target` beyond `tolerance` (-inf: none), and where. `design`: hits within
+// design_within of Φ are Φ's (left_to_design), as in the collision check and the back-simulation.
+struct CutterHits {
+  std::vector<double> depth;
+  std::vector<Eigen::Vector3d> at;
+};
+CutterHits cutter_hits(const SurfaceIndex& target, const Rails& rails, const ToolRadius& tool, int rows, double tolerance,
+                       double step, const SurfaceIndex* design, double design_within) {
+  CutterHits out{std::vector<double>(size_t(rows), -INFINITY), std::vector<Eigen::Vector3d>(size_t(rows), Eigen::Vector3d::Zero())};
+  ToolAssembly cutter;
+  cutter.cutter = cutter_spheres(tool, rails.length);
+  std::vector<ToolPose> poses;
+  for (int i = 0; i < rows; ++i) {
+    const double t = double(i) / (rows - 1);
+    const Eigen::Vector3d a = rails.a.point(t), b = rails.b.point(t);
+    poses.push_back({a, (b - a).normalized()});
+  }
+  CollisionOptions co;
+  co.gouge_tolerance_mm = tolerance;
+  co.clearance_mm = step;
+  co.design = design;
+  co.design_within_mm = design_within;
+  CollisionReport r;
+  try {
+    r = check_collisions(target, poses, cutter, co);
+  } catch (const InputError&) {  // beyond the check's bounds: the fit's own samples decide alone
+    return out;
+  }
+  for (const CollisionInterval& iv : r.intervals)
+    for (int i = iv.pose_begin; i <= iv.pose_end && i < rows; ++i)
+      if (iv.max_depth_mm > out.depth[size_t(i)]) out.depth[size_t(i)] = iv.max_depth_mm, out.at[size_t(i)] = iv.at;
+  return out;
+}
+
+// The share of the tolerance the trims keep in hand: a row is kept when the cutter enters Φ or the
+// part by at most (1 - kTrimMargin) of its tolerance, so that the program, which follows the fit to
+// ~2e-4 mm and is swept between its blocks, is not refused at the tolerance itself (HECC impeller:
+// the fit trimmed at exactly 0.02 mm, the collision check then found 0.0200x mm and refused it).
+constexpr double kTrimMargin = 0.1;
+
+// The rows (as many as Ω's) where the tool keeps out of the check surface, and the worst row: the
+// fit's samples (shank, holder and cutter), and the cutter as the collision check judges it, there
+// with `margin` of the check tolerance in hand (intrusion counted beyond (1 - margin) of it).
+std::vector<char> clear_rows(const SurfaceIndex& surface, const PatchFit& f, const PatchOptions& o, double margin,
+                             CheckProfile& profile) {
   const int rows = f.machined.omega.n_t;
-  profile = check_profile(f.fit.rails, f.fit.tool, o.fit.check, rows, o.fit.samples_s, true);
+  const CheckSurface& c = o.fit.check;
+  profile = check_profile(f.fit.rails, f.fit.tool, c, rows, o.fit.samples_s, true);
+  const double keep = (1 - margin) * c.tolerance;
+  const CutterHits hits = cutter_hits(*c.part, f.fit.rails, f.fit.tool, rows, keep, c.clearance > 0 ? c.clearance : 10 * c.tolerance,
+                                      &surface, c.twin_sag + o.tolerance);
   std::vector<char> ok(size_t(rows), 1);
-  for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(profile.intrusion[size_t(i)] > 0);
+  for (size_t i = 0; i < size_t(rows); ++i) {
+    if (hits.depth[i] - keep > profile.intrusion[i])
+      profile.intrusion[i] = hits.depth[i] - keep, profile.body[i] = 0, profile.at[i] = hits.at[i];
+    ok[i] = !(profile.intrusion[i] > 0);
+  }
   return ok;
 }
 }  // namespace
@@ -230,11 +284,23 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
   const bool check = o.fit.check.part != nullptr;
   CheckProfile profile;
   // The rows to keep: not gouging Φ (trim_gouges) and clear of the check surface (with a part).
+  const int rows = out.machined.omega.n_t;
+  // The rows not gouging Φ beyond `tolerance`: Ω's samples against Φ; with a part (a job that is
+  // collision-checked and posted) also the cutter against Φ as the collision check judges it, whose
+  // solid cutter with flat ends sees what Ω's side envelope does not (its rims at Φ's edges).
+  const auto ungouged = [&](double tolerance) {
+    std::vector<char> ok = ungouged_rows(out.machined, tolerance);
+    if (!check) return ok;
+    const CutterHits hits = cutter_hits(surface, out.fit.rails, out.fit.tool, rows, tolerance,
+                                        o.fit.check.clearance > 0 ? o.fit.check.clearance : 10 * o.tolerance, nullptr, 0);
+    for (size_t i = 0; i < ok.size(); ++i) ok[i] = ok[i] && !std::isfinite(hits.depth[i]);
+    return ok;
+  };
   const auto keep = [&] {
     std::vector<char> ok(size_t(out.machined.omega.n_t), 1);
-    if (o.trim_gouges) ok = ungouged_rows(out.machined, o.tolerance);
+    if (o.trim_gouges) ok = ungouged(check ? (1 - kTrimMargin) * o.tolerance : o.tolerance);
     if (check) {
-      const std::vector<char> clear = clear_rows(out, o, profile);
+      const std::vector<char> clear = clear_rows(surface, out, o, kTrimMargin, profile);
       for (size_t i = 0; i < ok.size(); ++i) ok[i] = ok[i] && clear[i];
     }
     return ok;
@@ -261,8 +327,12 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
   }
   const auto [t0, t1] = ungouged_range(out.machined, o.tolerance);
   out.gouges = !(t0 == 0.0 && t1 == 1.0);
+  if (o.trim_gouges && check && !out.gouges) {
+    const std::vector<char> ok = ungouged(o.tolerance);
+    out.gouges = std::any_of(ok.begin(), ok.end(), [](char c) { return c == 0; });
+  }
   if (check) {
-    (void)clear_rows(out, o, profile);
+    (void)clear_rows(surface, out, o, 0, profile);
     out.check_intrusion = *std::max_element(profile.intrusion.begin(), profile.intrusion.end());
   }
   out.coverage = coverage(surface.mesh(), out.machined.design_deviation, o.tolerance);

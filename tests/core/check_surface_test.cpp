@@ -98,6 +98,25 @@ struct Setup {
     return fr.length_to_mm((r.b.point(t) - r.a.point(t)).x());
   }
 };
+
+// The fitted motion (tip at a) and its assembly in mm, checked as the job's collision check does:
+// 101 poses, the cutter's spheres, a Ø6 shank of `shank_mm` and a Ø20 holder of 20 mm, clearance
+// 1 mm, gouge tolerance 0.005 mm.
+CollisionReport collisions_mm(const Setup& s, const PatchFit& f, const SurfaceIndex& part_mm, double shank_mm) {
+  std::vector<ToolPose> poses;
+  for (int i = 0; i <= 100; ++i) {
+    const Eigen::Vector3d a = s.fr.to_mm(f.fit.rails.a.point(i / 100.0)), b = s.fr.to_mm(f.fit.rails.b.point(i / 100.0));
+    poses.push_back({a, (b - a).normalized()});
+  }
+  ToolAssembly t;
+  const double L = s.fr.length_to_mm(f.fit.rails.length);
+  for (int j = 0; j <= 100; ++j) t.cutter.emplace_back(L * j / 100, s.fr.length_to_mm(f.fit.tool.d(j / 100.0)));
+  t.shank_length = shank_mm, t.shank_diameter = 6, t.holder_length = 20, t.holder_diameter = t.holder_diameter_far = 20;
+  CollisionOptions co;
+  co.clearance_mm = 1.0;
+  co.gouge_tolerance_mm = 0.005;
+  return check_collisions(part_mm, poses, t, co);
+}
 }  // namespace
 
 TEST_CASE("a tool standing next to a wall tilts away instead of cutting it" * doctest::test_suite("heavy")) {
@@ -374,22 +393,7 @@ TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's 
   // would reach down to the fin from a 10 mm shank's end).
   for (int k = 0; k <= 40; ++k) po.fit.check.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(k <= 20 ? 3.0 : 10.0));
   const PatchSpec spec = s.upright();
-  // The motion and the assembly in mm, checked as the job's collision check does.
-  const auto collisions = [&](const PatchFit& f) {
-    std::vector<ToolPose> poses;
-    for (int i = 0; i <= 100; ++i) {
-      const Eigen::Vector3d a = s.fr.to_mm(f.fit.rails.a.point(i / 100.0)), b = s.fr.to_mm(f.fit.rails.b.point(i / 100.0));
-      poses.push_back({a, (b - a).normalized()});
-    }
-    ToolAssembly t;
-    const double L = s.fr.length_to_mm(f.fit.rails.length);
-    for (int j = 0; j <= 100; ++j) t.cutter.emplace_back(L * j / 100, s.fr.length_to_mm(f.fit.tool.d(j / 100.0)));
-    t.shank_length = 20, t.shank_diameter = 6, t.holder_length = 20, t.holder_diameter = t.holder_diameter_far = 20;
-    CollisionOptions co;
-    co.clearance_mm = 1.0;
-    co.gouge_tolerance_mm = 0.005;
-    return check_collisions(fin_index_mm, poses, t, co);
-  };
+  const auto collisions = [&](const PatchFit& f) { return collisions_mm(s, f, fin_index_mm, 20); };
   PatchOptions free = po;
   free.fit.check = {};
   const PatchFit g = fit_patch(s.phi, spec, free);
@@ -411,4 +415,43 @@ TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's 
   CHECK(y_end < 39.72);
   CHECK(y_end > 38.0);
   CHECK(collisions(f).clear());
+}
+
+TEST_CASE("a fin reaching 0.5 mm into the cutter's side just above its tip, between the fit's rims: trimmed, and the collision check agrees" * doctest::test_suite("heavy")) {
+  // The cutter (radius ~5 at the upright motion's axis x = 5) meets a plate at z 1.2-1.3 whose edge
+  // lies 0.5 mm inside its side (x >= 9.5) for y >= 40. The fit's own cutter samples do not reach it:
+  // rims at the tip and 2.5 mm above it (both 1.2 mm from the plate), spheres from 5 mm up (5.8 mm
+  // from its edge). The trim judges the cutter as the collision check does and stops the motion
+  // before the plate.
+  Setup s;
+  const TriMesh plate_mm = box_mesh({9.5, 40, 1.2}, {30, 80, 1.3}, 2);
+  const SurfaceIndex plate(to_unit(plate_mm, s.fr)), plate_index_mm(plate_mm);
+  PatchOptions po = s.patch_options();
+  po.fit.check.part = &plate;
+  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
+  po.fit.check.clearance = s.fr.length_to_unit(1.0);
+  po.fit.check.body = s.body();
+  const PatchSpec spec = s.upright();
+  PatchOptions free = po;
+  free.fit.check = {};
+  const PatchFit g = fit_patch(s.phi, spec, free);
+  const CollisionReport before = collisions_mm(s, g, plate_index_mm, 10);
+  REQUIRE_FALSE(before.clear());
+  CHECK(before.intervals.front().component == Component::Tool);
+  CHECK(before.intervals.front().max_depth_mm > 0.4);
+  const CheckProfile samples = check_profile(g.fit.rails, g.fit.tool, po.fit.check, 50, po.fit.samples_s, true);
+  CHECK(*std::max_element(samples.intrusion.begin(), samples.intrusion.end()) <= 0);
+  const PatchFit f = fit_patch(s.phi, spec, po);
+  double tip_z = INFINITY;
+  for (int i = 0; i <= 20; ++i) tip_z = std::min(tip_z, s.fr.to_mm(f.fit.rails.a.point(i / 20.0)).z());
+  const double y_end = s.fr.to_mm(f.fit.rails.a.point(1)).y();
+  MESSAGE("t ", f.t_from, "-", f.t_to, ", motion ends at y = ", y_end, " mm, tip at z >= ", tip_z, " mm, coverage ", f.coverage,
+          " (unchecked ", g.coverage, ")");
+  CHECK(machinable(f));
+  CHECK(collisions_mm(s, f, plate_index_mm, 10).clear());
+  // Either the motion stops before the plate (the tool's circle of radius 5 about x = 5 meets its
+  // corner x = 9.5, y = 40 from y = 40 - sqrt(25 - 4.5^2) = 37.82 on) or the tool is ground shorter
+  // above it: most of the flank is still machined.
+  CHECK(((y_end < 37.85 && y_end > 36.5) || tip_z > 1.3));
+  CHECK(f.coverage > 0.5 * g.coverage);
 }
