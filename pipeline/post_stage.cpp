@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include "core/errors.h"
 #include "pipeline/data_dir.h"
@@ -111,6 +112,8 @@ nlohmann::ordered_json program_report(const PostedProgram& w, const Machine& m) 
     j["rotary_range_deg"][m.rotary[k].name] = {std::round(w.rotary_range[k][0] * 1e4) / 1e4,
                                                std::round(w.rotary_range[k][1] * 1e4) / 1e4};
   j["cut_minutes"] = std::round(w.minutes * 1e4) / 1e4;
+  if (w.posted.links_checked && std::isfinite(w.posted.min_link_clearance_mm))
+    j["min_link_clearance_mm"] = std::round(w.posted.min_link_clearance_mm * 1e4) / 1e4;  // rapids, back-simulated
   return j;
 }
 

@@ -71,8 +71,10 @@ struct Posting {
   std::string text;
   std::vector<VerifyTool> tools;
 };
-Posting post_wall(const VerifyCase& c, const SurfaceIndex& part, const std::function<double(double)>& r, const Eigen::Vector3d& origin) {
+Posting post_wall(const VerifyCase& c, const SurfaceIndex& part, const std::function<double(double)>& r, const Eigen::Vector3d& origin,
+                  double clearance_mm = PostOptions{}.clearance_mm) {
   PostOptions o;
+  o.clearance_mm = clearance_mm;
   o.dialect = c.dialect;
   o.path.tool_length_mm = 80;
   o.part = &part;
@@ -132,7 +134,13 @@ TEST_CASE("every shipped machine and dialect: the posted wall pass back-simulate
     CHECK(p.posted.links_checked);
     CHECK(p.posted.refused.empty());
     MESSAGE(c.label << ": min link clearance " << p.posted.min_link_clearance_mm << " mm, safe Z " << p.posted.program.safe_z);
-    CHECK(p.posted.min_link_clearance_mm > 0);
+    // The links keep the clearance they were planned with (PostOptions' default, 1 mm), not merely
+    // off the part; with 6 mm too.
+    CHECK(p.posted.min_link_clearance_mm >= PostOptions{}.clearance_mm);
+    const Posting wide = post_wall(c, part, cone, origin, 6);
+    MESSAGE(c.label << ": min link clearance " << wide.posted.min_link_clearance_mm << " mm at a 6 mm clearance");
+    CHECK(wide.posted.refused.empty());
+    CHECK(wide.posted.min_link_clearance_mm >= 6);
     // Safe Z is above the part's top (z = 15 here; the tables turn it in the machine frame).
     CHECK(p.posted.program.safe_z > 15);
     const VerifyReport rep = verify_text(p.text, c.dialect, "wall", c.machine, part, p.tools, {});
