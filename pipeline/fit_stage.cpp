@@ -154,9 +154,10 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
   o.clearance_mm = job.clearance_mm;
   o.gouge_tolerance_mm = job.tolerance_mm;
   CollisionOptions o_part = o;
-  o_part.gouge_tolerance_mm = job.check_tolerance_mm.value_or(job.tolerance_mm);
+  const CutJudgement judged = cut_judgement(job, f.check_twin_sag_mm);
+  o_part.gouge_tolerance_mm = judged.part_mm;
   o_part.design = &design;
-  o_part.design_within_mm = f.check_twin_sag_mm + job.tolerance_mm;
+  o_part.design_within_mm = judged.design_within_mm;
   const auto check = [&](const std::vector<ToolPose>& poses, const ToolAssembly& assembly) {
     CollisionReport r = check_collisions(design, poses, assembly, o);
     if (check_index) {

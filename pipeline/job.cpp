@@ -379,4 +379,8 @@ Job read_job(const std::filesystem::path& file) {
   return job;
 }
 
+CutJudgement cut_judgement(const Job& job, double twin_sag_mm) {
+  return {job.check_tolerance_mm.value_or(job.tolerance_mm), job.tolerance_mm, twin_sag_mm + job.tolerance_mm};
+}
+
 }  // namespace flankcam::pipeline

@@ -102,6 +102,15 @@ struct Job {
 
 // Throws InputError "FILE:LINE: KEY: what is wrong" for unknown keys, wrong types, bad values,
 // missing files.
+// How the cut is judged with a separate part, in the fit's trim, the collision check and the
+// back-simulation alike: the part without Φ's coarser twin by `part_mm` (check_tolerance), Φ itself by
+// `design_mm` (the fitted tolerance), and a cutter hit on that part within `design_within_mm` of Φ
+// (the twin's sag plus the tolerance: where the part's coarse faces meet the twin's hole) left to Φ.
+struct CutJudgement {
+  double part_mm = 0, design_mm = 0, design_within_mm = 0;
+};
+[[nodiscard]] CutJudgement cut_judgement(const Job& job, double twin_sag_mm);
+
 [[nodiscard]] Job read_job(const std::filesystem::path& file);
 
 }  // namespace flankcam::pipeline

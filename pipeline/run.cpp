@@ -321,9 +321,10 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     design_work.emplace(to_work(j.post, r.fit.fitted.surface.mesh));
     settings.options.cut_part = &*cut_part;
     settings.options.design = &*design_work;
-    settings.options.gouge_tolerance_mm = j.check_tolerance_mm.value_or(j.tolerance_mm);
-    settings.options.design_gouge_tolerance_mm = j.tolerance_mm;
-    settings.options.design_within_mm = r.fit.fitted.check_twin_sag_mm + j.tolerance_mm;
+    const CutJudgement c = cut_judgement(j, r.fit.fitted.check_twin_sag_mm);
+    settings.options.gouge_tolerance_mm = c.part_mm;
+    settings.options.design_gouge_tolerance_mm = c.design_mm;
+    settings.options.design_within_mm = c.design_within_mm;
   }
   const Machine& m = r.machine;
   options.progress(fmt::format("kinematics and post: {} patch(es) on {} ({})", inputs.size(), m.name, m.kind()));

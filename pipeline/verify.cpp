@@ -149,9 +149,10 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
     const CheckPart cp = check_part(separate->mesh(), run.design, j.tolerance_mm);
     cut.emplace(cp.mesh);
     judge.cut_part = &*cut;
-    judge.design_within_mm = cp.twin_sag + j.tolerance_mm;
-    judge.gouge_tolerance_mm = j.check_tolerance_mm.value_or(j.tolerance_mm);
-    judge.design_gouge_tolerance_mm = j.tolerance_mm;
+    const CutJudgement c = cut_judgement(j, cp.twin_sag);
+    judge.design_within_mm = c.design_within_mm;
+    judge.gouge_tolerance_mm = c.part_mm;
+    judge.design_gouge_tolerance_mm = c.design_mm;
   }
 
   for (const std::string& file : request.programs) {
