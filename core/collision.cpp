@@ -38,6 +38,19 @@ std::string ToolAssembly::validate() const {
   return {};
 }
 
+std::vector<Eigen::Vector2d> cutter_from_meridian(const std::vector<Eigen::Vector2d>& meridian) {
+  std::vector<Eigen::Vector2d> cutter;
+  for (const Eigen::Vector2d& zr : meridian)
+    if (zr.x() > 1e-9 && (cutter.empty() || zr.x() > cutter.back().x())) {
+      if (cutter.empty()) cutter.emplace_back(0.0, zr.y());
+      if (cutter.size() == 1 && zr.y() == 0) continue;  // a ball end's tip on the axis (core/tool_end.h): once
+      cutter.push_back(zr);
+    } else if (std::abs(zr.x()) <= 1e-9 && cutter.empty()) {
+      cutter.emplace_back(0.0, zr.y());
+    }
+  return cutter;
+}
+
 std::string CollisionOptions::validate() const {
   if (!(clearance_mm > 0)) return "clearance: must be > 0 mm";
   if (!(gouge_tolerance_mm > 0)) return "gouge tolerance: must be > 0 mm";
@@ -48,7 +61,7 @@ std::string CollisionOptions::validate() const {
 
 namespace {
 
-// Radius of the cutter's spheres at z (linear between the given spheres).
+// The cutter's radius at z (linear between the given radii).
 double cutter_radius(const ToolAssembly& t, double z) {
   const auto& c = t.cutter;
   if (z <= c.front().x()) return c.front().y();
@@ -198,7 +211,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
       Hit h;
       h.at = f.point;
       if (s.cutter) {
-        // The cutter is the solid of revolution of the spheres' radii between its flat end faces: a
+        // The cutter is the solid of revolution of its radii between its flat end faces: a
         // part point below the tip plane (a floor the tip stands on) is outside it, and a point inside
         // is as deep as its way out through the side or the bottom face.
         const Eigen::Vector3d d = f.point - pos[size_t(here)].tip;
@@ -276,7 +289,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
 }
 
 TriMesh assembly_mesh(const ToolAssembly& tool, const ToolPose& pose, int segments) {
-  // Meridian: cutter spheres' radii, shank, holder; closed by the axis points at both ends.
+  // Meridian: the cutter's radii, shank, holder; closed by the axis points at both ends.
   std::vector<Eigen::Vector2d> mer;
   for (const auto& c : tool.cutter) mer.push_back(c);
   const double L = tool.cutter_length();

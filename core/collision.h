@@ -2,7 +2,7 @@
 // of poses against the whole part. Everything in mm.
 //
 // The assembly is a solid of revolution about the tool axis, z measured from the tip:
-//   cutter  z in [0, L]: the union of the fitted spheres (z_j, d_j) (the tool the fit assumes);
+//   cutter  z in [0, L]: radii (z_j, r_j), linear between them: the tool's meridian (cutter_from_meridian);
 //   shank   z in [L, L + Ls]: cylinder of diameter Ds;
 //   holder  z beyond: a cone from Dh0 to Dh1 over Lh, then a cylinder of Dh1 over Lc.
 // It is sampled along the axis in slabs of width h; a slab is queried for the nearest part point
@@ -14,6 +14,7 @@
 // queries, not the positions times the samples.
 #pragma once
 #include <Eigen/Core>
+#include <cmath>
 #include <functional>
 #include <string>
 #include <vector>
@@ -25,7 +26,7 @@
 namespace flankcam {
 
 struct ToolAssembly {
-  std::vector<Eigen::Vector2d> cutter;  // spheres (z, radius) along the axis from the tip, z increasing, mm
+  std::vector<Eigen::Vector2d> cutter;  // meridian (z, radius) along the axis from the tip, z increasing, mm
   double shank_length = 0, shank_diameter = 0;
   double holder_length = 0, holder_diameter = 0, holder_diameter_far = 0;  // cone (equal diameters: cylinder)
   double holder_cylinder_length = 0;
@@ -78,6 +79,11 @@ struct CollisionReport {
 [[nodiscard]] inline bool left_to_design(const SurfaceIndex& design, const Eigen::Vector3d& part_point, double within_mm) {
   return design.closest(part_point).distance <= within_mm;
 }
+
+// The cutter of a tool whose meridian (z, r) from its tip end is given (an APT profile, a tool end's
+// profile; any unit): from the tip plane z = 0 up, the first radius above the tip standing at z = 0.
+// A ball end's tip on the axis is kept once.
+[[nodiscard]] std::vector<Eigen::Vector2d> cutter_from_meridian(const std::vector<Eigen::Vector2d>& meridian);
 
 [[nodiscard]] CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<ToolPose>& poses,
                                                const ToolAssembly& tool, const CollisionOptions& options);

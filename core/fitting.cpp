@@ -300,11 +300,28 @@ ToolRadius initial_tool(const SurfaceIndex& surface, const Rails& rails, const F
   return tool;
 }
 
-std::vector<Eigen::Vector2d> cutter_spheres(const ToolRadius& tool, double length, int points) {
+std::vector<Eigen::Vector2d> cutter_union(const ToolRadius& tool, double length, int points) {
+  const int ns = 1024;
+  std::vector<double> d(ns + 1);
+  for (int k = 0; k <= ns; ++k) d[size_t(k)] = tool.d(double(k) / ns);
   std::vector<Eigen::Vector2d> out;
-  for (int j = 0; j < points; ++j) {
-    const double s = double(j) / (points - 1);
-    out.emplace_back(length * s, tool.d(s));
+  for (int i = 0; i < points; ++i) {
+    const double z = length * i / (points - 1);
+    const auto r2 = [&](double s) { const double dz = z - s * length, ds = tool.d(s); return ds * ds - dz * dz; };
+    int best = 0;
+    for (int k = 1; k <= ns; ++k) {
+      const double dz = z - length * k / ns, dz0 = z - length * best / ns;
+      if (d[size_t(k)] * d[size_t(k)] - dz * dz > d[size_t(best)] * d[size_t(best)] - dz0 * dz0) best = k;
+    }
+    // Refined by golden section between the neighbouring samples (r2 is unimodal there).
+    double lo = std::max(0, best - 1) / double(ns), hi = std::min(ns, best + 1) / double(ns);
+    const double g = 0.5 * (std::sqrt(5.0) - 1);
+    for (int it = 0; it < 40; ++it) {
+      const double a = hi - g * (hi - lo), b = lo + g * (hi - lo);
+      if (r2(a) < r2(b)) lo = a; else hi = b;
+    }
+    const double best_r2 = std::max({r2(0.5 * (lo + hi)), r2(double(best) / ns)});
+    out.emplace_back(z, std::sqrt(std::max(0.0, best_r2)));
   }
   return out;
 }

@@ -202,9 +202,14 @@ struct ErrorStats {
 // The half-meridian in the tool's own frame (z along a->b from a, r radial): the planar
 // envelope of the circles (z, d(z)); unit frame.
 [[nodiscard]] std::vector<Eigen::Vector2d> meridian(const ToolRadius& tool, double length, int points = 61);
-// The cutter as the collision check takes it (ToolAssembly::cutter): the spheres (z, d(z / length)) at
-// `points` uniform z from the tip end (s = 0) to `length`.
-[[nodiscard]] std::vector<Eigen::Vector2d> cutter_spheres(const ToolRadius& tool, double length, int points = 61);
+// The cutter as the fit holds it, for ToolAssembly::cutter: the union of the spheres d(s) centred on the
+// axis at z = s L, s in [0, 1], between the end planes z = 0 and z = L; its radius at `points` uniform z,
+// max over s of sqrt(d(s)^2 - (z - s L)^2) (to ~1e-6 of L). Along the side it is the meridian; near the
+// ends, where the envelope's characteristic circles run out, the end spheres. The spheres' radii d(z)
+// themselves fall short of it on a sloped tool by d (1 / sqrt(1 - d'^2) - 1) (0.03 mm on rotor 37's
+// tapers: a program refused by the back-simulation after a clean collision check). The collision
+// check, the fit's trim and the back-simulation of a fitted tool all judge this one shape.
+[[nodiscard]] std::vector<Eigen::Vector2d> cutter_union(const ToolRadius& tool, double length, int points = 121);
 
 // Where the radii d(s) over an axis of `length` describe no tool of revolution: a sphere radius
 // d <= 0, a slope |d'(z)| >= 1 (the circles nest inside each other: no meridian touches them all), or

@@ -110,7 +110,7 @@ CutterHits cutter_hits(const SurfaceIndex& target, const Rails& rails, const Too
                        double step, const SurfaceIndex* design, double design_within) {
   CutterHits out{std::vector<double>(size_t(rows), -INFINITY), std::vector<Eigen::Vector3d>(size_t(rows), Eigen::Vector3d::Zero())};
   ToolAssembly cutter;
-  cutter.cutter = cutter_spheres(tool, rails.length);
+  cutter.cutter = cutter_union(tool, rails.length);
   std::vector<ToolPose> poses;
   for (int i = 0; i < rows; ++i) {
     const double t = double(i) / (rows - 1);

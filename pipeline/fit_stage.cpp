@@ -92,7 +92,7 @@ nlohmann::ordered_json error_report(const ErrorStats& e, const Similarity& frame
 namespace {
 ToolAssembly assembly_of(const Job& job, const Similarity& fr, const FitResult& r) {
   ToolAssembly a;
-  for (const Eigen::Vector2d& zd : cutter_spheres(r.tool, r.rails.length)) a.cutter.push_back(fr.length_to_mm(1.0) * zd);
+  for (const Eigen::Vector2d& zr : cutter_union(r.tool, r.rails.length)) a.cutter.push_back(fr.length_to_mm(1.0) * zr);
   const HolderJob& h = job.holder;
   a.shank_length = h.shank_length, a.shank_diameter = h.shank_diameter;
   a.holder_length = h.length, a.holder_diameter = h.diameter, a.holder_diameter_far = h.diameter_far;

@@ -289,8 +289,7 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     const FittedPatch& p = r.fit.fitted.patches[k];
     r.tool_length_mm.push_back(tool_length(j, p));
     if (!r.fit.cl_data[k]) continue;
-    ToolAssembly assembly = p.assembly;  // the program's cutter is the tool's meridian
-    assembly.cutter = p.profile_mm;
+    const ToolAssembly& assembly = p.assembly;  // the cutter the collision check judged: the tool's meridian
     // passes: each its own section of the patch's program, in order, the last pass being the fit;
     // depth_cuts: within each pass its levels, the deepest last (passes outer, levels inner).
     std::vector<ClProgram> passes, sections;

@@ -81,16 +81,7 @@ Dialect dialect_of_file(const std::string& path) {
 
 ToolAssembly assembly_from_meridian(const std::vector<Eigen::Vector2d>& meridian, const ToolAssembly& holder) {
   ToolAssembly a = holder;
-  a.cutter.clear();
-  // From the tip: a meridian sampled from a little above it starts with its first radius at z = 0.
-  for (const Eigen::Vector2d& zr : meridian)
-    if (zr.x() > 1e-9 && (a.cutter.empty() || zr.x() > a.cutter.back().x())) {
-      if (a.cutter.empty()) a.cutter.emplace_back(0.0, zr.y());
-      if (a.cutter.size() == 1 && zr.y() == 0) continue;  // a ball end's tip on the axis (core/tool_end.h): once
-      a.cutter.push_back(zr);
-    } else if (std::abs(zr.x()) <= 1e-9 && a.cutter.empty()) {
-      a.cutter.emplace_back(0.0, zr.y());
-    }
+  a.cutter = cutter_from_meridian(meridian);
   if (std::string why = a.validate(); !why.empty()) throw InputError(why);
   return a;
 }

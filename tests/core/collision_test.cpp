@@ -6,6 +6,7 @@
 
 #include "core/envelope.h"
 #include "core/errors.h"
+#include "core/fitting.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -262,4 +263,44 @@ TEST_CASE("a motion given as two poses or as a pose every half clearance reports
     CHECK(a.intervals[k].max_depth_mm == doctest::Approx(b.intervals[k].max_depth_mm));
     CHECK(a.intervals[k].at.x() == doctest::Approx(b.intervals[k].at.x()));
   }
+}
+
+TEST_CASE("the cutter is the union of the fitted spheres, not their radii: a steep cone's side is found where the radii fall short") {
+  // A cone r(z) = 2 + 0.3 z over 10 mm, as the fit holds it: spheres d(s) centred on the axis
+  // (tool_from_meridian). At z = 5 the cone's radius is 3.5 while the sphere centred there has
+  // d = 3.5 / sqrt(1 + 0.3^2) = 3.353: judged by the spheres' radii the side would stand 0.147 mm
+  // inside the tool the programs cut.
+  std::vector<Eigen::Vector2d> cone;
+  for (int k = 0; k <= 40; ++k) cone.emplace_back(0.25 * k, 2 + 0.3 * 0.25 * k);
+  const double L = 10;
+  const ToolRadius tool = tool_from_meridian(cone, 12);
+  CHECK(tool.d(0.5) == doctest::Approx(3.5 / std::sqrt(1.09)).epsilon(1e-3));
+  const std::vector<Eigen::Vector2d> cutter = cutter_union(tool, L);
+  REQUIRE(cutter.size() == 121);
+  CHECK(cutter.front().x() == 0.0);
+  CHECK(cutter.back().x() == doctest::Approx(L));
+  // Along the side the cone itself (the envelope's characteristic circles run from z = 0.6 to 8.6);
+  // above, the last sphere (radius d(1) = 5 / sqrt(1.09) = 4.79 at z = 10).
+  for (const Eigen::Vector2d& zr : cutter)
+    if (zr.x() > 0.7 && zr.x() < 8.5) CHECK(zr.y() == doctest::Approx(2 + 0.3 * zr.x()).epsilon(1e-3));
+  CHECK(cutter.back().y() == doctest::Approx(5 / std::sqrt(1.09)).epsilon(1e-3));
+  // A strip at radius 3.45 over z 4.9-5 (the tool vertical, tip at the origin): 0.05 mm into
+  // the cone, found; beside the spheres' radii it would be 0.1 mm clear.
+  ToolAssembly t;
+  t.cutter = cutter;
+  TriMesh wall;
+  wall.vertices = {{3.45, -3, 4.9}, {3.45, 3, 4.9}, {3.45, 3, 5}, {3.45, -3, 5}};
+  wall.faces = {{0, 1, 2}, {0, 2, 3}};
+  const SurfaceIndex part(wall);
+  CollisionOptions o;
+  o.gouge_tolerance_mm = 0.01;
+  o.clearance_mm = 0.5;
+  const std::vector<ToolPose> upright{{Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ()}};
+  const CollisionReport r = check_collisions(part, upright, t, o);
+  REQUIRE(r.intervals.size() == 1);
+  CHECK(r.intervals[0].component == Component::Tool);
+  CHECK(r.intervals[0].max_depth_mm == doctest::Approx(0.05).epsilon(0.05));
+  ToolAssembly radii;
+  for (int j = 0; j <= 40; ++j) radii.cutter.emplace_back(L * j / 40, tool.d(j / 40.0));
+  CHECK(check_collisions(part, upright, radii, o).clear());
 }
