@@ -3,6 +3,8 @@
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
+#include <Eigen/Geometry>
+
 #include <algorithm>
 #include <cmath>
 #include <optional>
@@ -128,6 +130,47 @@ bool axial(const ToolPose& p, const ToolPose& q) {
   return d.norm() > 1e-9 && p.axis.cross(q.axis).norm() < 1e-9 && p.axis.cross(d).norm() <= 1e-6 * d.norm();
 }
 
+// The lead point off pose p, where the rapid along the tool axis from above ends and the lead-in
+// begins (the lead-out ends and the retract along the axis begins): `lead` along lead_direction, or,
+// when the lead would cut the part or the assembly (its cutter grown by the clearance) would meet the
+// part on its way along the axis from beyond the part's reach down to that point, the direction
+// turned about the axis by 20-90 degrees either way, then lifted along the axis by half and a whole
+// lead (a hub sloping under the tool's end), then all twice as far out: the first clear candidate.
+// A flank in a narrow passage (HECC impeller: the plain lead point's rapid ran the cutter 1.7 mm into
+// the part) is entered from the side that is open. None clear: the plain point (the
+// back-simulation then says what it hits).
+Eigen::Vector3d lead_point(const SurfaceIndex& part, const ToolPose& p, const ToolAssembly& a, double lead, double clearance) {
+  const Eigen::Vector3d axis = p.axis.normalized(), n = lead_direction(part, p, a.cutter_length());
+  Eigen::AlignedBox3d box;
+  for (const Eigen::Vector3d& v : part.mesh().vertices) box.extend(v);
+  const double beyond = (box.center() - p.tip).norm() + 0.5 * box.diagonal().norm() + clearance;
+  // The cutter grown by the clearance on its side and below its tip (the grown tip stands that far
+  // under q: a floor under the tool's end counts too).
+  ToolAssembly grown = a;
+  for (Eigen::Vector2d& c : grown.cutter) c += Eigen::Vector2d(clearance, clearance);
+  if (clearance > 0) grown.cutter.insert(grown.cutter.begin(), Eigen::Vector2d(0, grown.cutter.front().y()));
+  CollisionOptions co;
+  co.clearance_mm = clearance;
+  co.gouge_tolerance_mm = 1e-6;
+  CollisionOptions lead_co = co;
+  lead_co.gouge_tolerance_mm = 0.1;
+  for (const double f : {1.0, 2.0})
+    for (const double lift : {0.0, 0.5, 1.0})
+      for (const double deg : {0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0, 90.0, -90.0}) {
+        const Eigen::Vector3d q = p.tip + f * lead * (Eigen::AngleAxisd(deg * M_PI / 180, axis) * n + lift * axis);
+        try {
+          // The lead itself, from a tenth of the way out (the pose touches the flank), must not cut the
+          // part (0.1 mm: a coarse twin of the flank stands proud of it by its sag); then the rapid above.
+          if (check_collisions(part, {{p.tip + 0.1 * (q - p.tip), axis}, {q, axis}}, a, lead_co).clear() &&
+              check_collisions(part, {{q + beyond * axis, axis}, {q - clearance * axis, axis}}, grown, co).clear())
+            return q;
+        } catch (const InputError&) {
+          return p.tip + lead * n;  // beyond the check's bounds: the plain point, judged by the back-simulation
+        }
+      }
+  return p.tip + lead * n;
+}
+
 // The CL-data with its links planned against the part: its own approach (rapids before the first
 // feed move and axial lead-ins) and leave (axial lead-outs and trailing rapids) replaced by a rapid to
 // a point `lead` off the first pose along the surface normal, a feed in along the normal, the cut, and
@@ -148,10 +191,10 @@ ClProgram plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAs
   const ClMove &p0 = cl.moves[first], &p1 = cl.moves[last];
   ClProgram out = cl;
   out.moves.clear();
-  out.moves.push_back({{p0.pose.tip + lead * lead_direction(part, p0.pose, a.cutter_length()), p0.pose.axis}, true, 0});
+  out.moves.push_back({{lead_point(part, p0.pose, a, lead, o.clearance_mm), p0.pose.axis}, true, 0});
   for (size_t k = first; k <= last; ++k) out.moves.push_back(cl.moves[k]);
   out.moves.back().rapid = false;
-  out.moves.push_back({{p1.pose.tip + lead * lead_direction(part, p1.pose, a.cutter_length()), p1.pose.axis}, false,
+  out.moves.push_back({{lead_point(part, p1.pose, a, lead, o.clearance_mm), p1.pose.axis}, false,
                        p1.feed_mm_min > 0 ? p1.feed_mm_min : p0.feed_mm_min});
   for (ClMove& mv : out.moves)
     if (!mv.rapid && !(mv.feed_mm_min > 0)) mv.feed_mm_min = p0.feed_mm_min;

@@ -493,3 +493,26 @@ TEST_CASE("a part whose coarse twin of the flank stands 0.03 mm proud: judged ap
   REQUIRE_FALSE(into.clean());
   for (const VerifyHit& h : into.hits) CHECK(h.depth_mm == doctest::Approx(0.03).epsilon(0.1));
 }
+
+TEST_CASE("a floor rising away from the flank: the links are lifted off it instead of running the cutter into it") {
+  // Beyond the cutter's reach (x < -3.2, the wall at x = r(z) > 0) a ramp rises at 1:2 away from the
+  // flank. The plain lead point (3.5 mm out along the normal, tip level with the cut) and its rapid
+  // put the cutter's end ~2 mm into the ramp, and twice as far out deeper still; lifted along the axis
+  // by a lead the link clears it by the clearance.
+  const Eigen::Vector3d origin(30, 10, -5);
+  TriMesh part_mesh = wall(cone);
+  const int base = int(part_mesh.vertices.size());
+  for (const Eigen::Vector3d& v : {Eigen::Vector3d(-3.2, -40, -0.2), Eigen::Vector3d(-3.2, 40, -0.2),
+                                   Eigen::Vector3d(-30, 40, -0.2 + 0.5 * 26.8), Eigen::Vector3d(-30, -40, -0.2 + 0.5 * 26.8)})
+    part_mesh.vertices.push_back(v);
+  part_mesh.faces.push_back({base, base + 2, base + 1});
+  part_mesh.faces.push_back({base, base + 3, base + 2});
+  const SurfaceIndex part(moved(part_mesh, origin));
+  const VerifyCase c = verify_cases()[1];  // xyzbc-trt, iso: joints
+  const Posting p = post_wall(c, part, cone, origin);
+  CHECK(p.posted.links_checked);
+  CHECK(p.posted.refused.empty());
+  CHECK(p.posted.min_link_clearance_mm >= PostOptions{}.clearance_mm);
+  const VerifyReport rep = verify_text(p.text, c.dialect, "wall", c.machine, part, p.tools, {});
+  CHECK(rep.clean());
+}
