@@ -93,6 +93,14 @@ struct Setup {
     po.tolerance = fr.length_to_unit(0.01);
     return po;
   }
+  // patch_options() against `part`: the cutter within 0.005 mm of it, shank and holder 1 mm off.
+  PatchOptions checked_options(const SurfaceIndex& part) const {
+    PatchOptions po = patch_options();
+    po.fit.check.part = &part;
+    po.fit.check.tolerance = fr.length_to_unit(0.005);
+    po.fit.check.clearance = fr.length_to_unit(1.0);
+    return po;
+  }
   // How far the axis leans away from the wall (+x) at the holder end, mm: x of b minus x of a.
   double lean_mm(const Rails& r, double t) const {
     return fr.length_to_mm((r.b.point(t) - r.a.point(t)).x());
@@ -385,10 +393,7 @@ TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's 
   Setup s;
   const TriMesh fin_mm = box_mesh({8.99, 40, 24.45}, {30, 80, 24.55}, 2);
   const SurfaceIndex fin(to_unit(fin_mm, s.fr)), fin_index_mm(fin_mm);
-  PatchOptions po = s.patch_options();
-  po.fit.check.part = &fin;
-  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
-  po.fit.check.clearance = s.fr.length_to_unit(1.0);
+  PatchOptions po = s.checked_options(fin);
   // A shank of 20 mm here (the fit's samples are balls: the holder's, Ø22 with the clearance,
   // would reach down to the fin from a 10 mm shank's end).
   for (int k = 0; k <= 40; ++k) po.fit.check.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(k <= 20 ? 3.0 : 10.0));
@@ -426,10 +431,7 @@ TEST_CASE("a fin reaching 0.5 mm into the cutter's side just above its tip, betw
   Setup s;
   const TriMesh plate_mm = box_mesh({9.5, 40, 1.2}, {30, 80, 1.3}, 2);
   const SurfaceIndex plate(to_unit(plate_mm, s.fr)), plate_index_mm(plate_mm);
-  PatchOptions po = s.patch_options();
-  po.fit.check.part = &plate;
-  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
-  po.fit.check.clearance = s.fr.length_to_unit(1.0);
+  PatchOptions po = s.checked_options(plate);
   po.fit.check.body = s.body();
   const PatchSpec spec = s.upright();
   PatchOptions free = po;
