@@ -309,10 +309,10 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
   for (int round = 0; (o.trim_gouges || check) && round < 3; ++round) {
     const std::vector<char> ok = keep();
     if (std::all_of(ok.begin(), ok.end(), [](char c) { return c != 0; })) break;
-    if (check && round == 0) {  // why: the worst intrusion before trimming
+    if (check && round == 0) {  // why: the worst intrusion before trimming (none: Φ's gouges were why)
       const auto worst = std::max_element(profile.intrusion.begin(), profile.intrusion.end());
       const size_t i = size_t(worst - profile.intrusion.begin());
-      out.check_trim = {profile.body[i] != 0, *worst, profile.at[i]};
+      if (*worst > 0) out.check_trim = {profile.body[i] != 0, *worst, profile.at[i]};
     }
     const auto [t0, t1] = longest_run(ok);
     if (!(t1 - t0 > 0.02)) {  // nothing (or almost nothing) can be cut: left as it is, reported
