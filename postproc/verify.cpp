@@ -380,23 +380,29 @@ ClFit nearest_on_cl(const ClMotion& cl, const ToolPose& p, const VerifyOptions& 
   return best;
 }
 
-// A lead block of the planner (nc_program.cpp plan_links): the axis held, one end on the CL motion and
-// every position on the line from there along the surface normal (lead_direction).
+// A lead block of the planner (nc_program.cpp plan_links, lead_point): the axis held, one end on the
+// CL motion and every position on the straight line from there to a lead point along one of the
+// planner's directions: the surface normal across the axis (lead_direction), turned about the axis by
+// 20, 40, 60 or 90 degrees either way, lifted along the axis by none, half or all of the lead.
 bool is_lead(const SimBlock& sb, const ClMotion& cl, const SurfaceIndex& part, const VerifyOptions& o) {
   const ToolPose& end = sb.positions.back();
   if (angle_deg(sb.start.axis, end.axis) > o.cl_angle_tolerance_deg) return false;
-  const double L = sb.vt->assembly.cutter_length();
+  const double L = sb.vt->assembly.cutter_length(), tol = o.cl_tolerance_mm;
   for (const ToolPose* on : {&sb.start, &end}) {
     if (nearest_on_cl(cl, *on, o).score(o) > 1) continue;
     const ToolPose& off = on == &end ? sb.start : end;
-    const Eigen::Vector3d dir = lead_direction(part, *on, L);
-    if ((off.tip - on->tip).dot(dir) <= 0) continue;
-    bool along = true;
-    for (const ToolPose& q : sb.positions) {
-      const Eigen::Vector3d v = q.tip - on->tip;
-      along &= (v - v.dot(dir) * dir).norm() <= o.cl_tolerance_mm && angle_deg(q.axis, on->axis) <= o.cl_angle_tolerance_deg;
-    }
-    if (along) return true;
+    const Eigen::Vector3d n = lead_direction(part, *on, L), run = off.tip - on->tip, axis = on->axis.normalized();
+    for (const double lift : {0.0, 0.5, 1.0})
+      for (const double deg : {0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0, 90.0, -90.0}) {
+        const Eigen::Vector3d dir = (Eigen::AngleAxisd(deg * kDeg, axis) * n + lift * axis).normalized();
+        if (!(run.dot(dir) > tol)) continue;
+        bool along = true;
+        for (const ToolPose& q : sb.positions) {
+          const Eigen::Vector3d v = q.tip - on->tip;
+          along &= (v - v.dot(dir) * dir).norm() <= tol && angle_deg(q.axis, on->axis) <= o.cl_angle_tolerance_deg;
+        }
+        if (along) return true;
+      }
   }
   return false;
 }
