@@ -494,7 +494,8 @@ TEST_CASE("a part whose coarse twin of the flank stands 0.03 mm proud: judged ap
   for (const VerifyHit& h : into.hits) CHECK(h.depth_mm == doctest::Approx(0.03).epsilon(0.1));
 }
 
-TEST_CASE("a floor rising away from the flank: the links are lifted off it instead of running the cutter into it") {
+TEST_CASE("a floor rising away from the flank: the links are lifted off it instead of running the cutter into it" *
+          doctest::test_suite("heavy")) {
   // Beyond the cutter's reach (x < -3.2, the wall at x = r(z) > 0) a ramp rises at 1:2 away from the
   // flank. The plain lead point (3.5 mm out along the normal, tip level with the cut) and its rapid
   // put the cutter's end ~2 mm into the ramp, and twice as far out deeper still; lifted along the axis
