@@ -140,24 +140,31 @@ CutterHits cutter_hits(const SurfaceIndex& target, const Rails& rails, const Too
 // the fit trimmed at exactly 0.02 mm, the collision check then found 0.0200x mm and refused it).
 constexpr double kTrimMargin = 0.1;
 
-// The rows (as many as Ω's) where the tool keeps out of the check surface, and the worst row: the
-// fit's samples (shank, holder and cutter), and the cutter as the collision check judges it, there
-// with `margin` of the check tolerance in hand (intrusion counted beyond (1 - margin) of it).
-std::vector<char> clear_rows(const SurfaceIndex& surface, const PatchFit& f, const PatchOptions& o, double margin,
-                             CheckProfile& profile) {
+// The step the motion between Ω's rows is checked at (cutter_hits): the clearance, else ten times the
+// tolerance (both unit frame).
+double hit_step(const PatchOptions& o) { return o.fit.check.clearance > 0 ? o.fit.check.clearance : 10 * o.tolerance; }
+
+// The check surface at Ω's rows: the fit's samples (shank, holder and cutter; intrusion beyond the check
+// tolerance) and the cutter as the collision check judges it (hits deeper than `threshold`).
+struct PartCheck {
+  CheckProfile profile;
+  CutterHits hits;
+};
+PartCheck part_check(const SurfaceIndex& surface, const PatchFit& f, const PatchOptions& o, double threshold) {
   const int rows = f.machined.omega.n_t;
   const CheckSurface& c = o.fit.check;
-  profile = check_profile(f.fit.rails, f.fit.tool, c, rows, o.fit.samples_s, true);
-  const double keep = (1 - margin) * c.tolerance;
-  const CutterHits hits = cutter_hits(*c.part, f.fit.rails, f.fit.tool, rows, keep, c.clearance > 0 ? c.clearance : 10 * c.tolerance,
-                                      &surface, c.twin_sag + o.tolerance);
-  std::vector<char> ok(size_t(rows), 1);
-  for (size_t i = 0; i < size_t(rows); ++i) {
-    if (hits.depth[i] - keep > profile.intrusion[i])
-      profile.intrusion[i] = hits.depth[i] - keep, profile.body[i] = 0, profile.at[i] = hits.at[i];
-    ok[i] = !(profile.intrusion[i] > 0);
+  return {check_profile(f.fit.rails, f.fit.tool, c, rows, o.fit.samples_s, true),
+          cutter_hits(*c.part, f.fit.rails, f.fit.tool, rows, threshold, hit_step(o), &surface, c.twin_sag + o.tolerance)};
+}
+// Its intrusion per row with the cutter's hits counted beyond `threshold` (those deeper than it): the
+// worst of the two, and where.
+CheckProfile intrusion(const PartCheck& pc, double threshold) {
+  CheckProfile p = pc.profile;
+  for (size_t i = 0; i < p.intrusion.size(); ++i) {
+    const double d = pc.hits.depth[i];
+    if (d > threshold && d - threshold > p.intrusion[i]) p.intrusion[i] = d - threshold, p.body[i] = 0, p.at[i] = pc.hits.at[i];
   }
-  return ok;
+  return p;
 }
 }  // namespace
 
@@ -242,9 +249,9 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
     return o.orient_by_part && mean_axis(f.fit.rails).dot(*o.fit.check.up) < 0 ? reversed(std::move(f)) : f;
   };
   // Clear along the whole motion: machine_and_trim's check (as dense as the collision check) found
-  // no intrusion to trim for.
+  // no intrusion to trim for (check_trim is set only for one).
   PatchFit best = machine_and_trim(surface, plain, o);
-  if (!(best.check_trim && best.check_trim->intrusion > 0)) return tip_at_a(std::move(best));
+  if (!best.check_trim) return tip_at_a(std::move(best));
   // The tool shortened at its tip (a hub under the flank's lower edge): clear, it is compared with the
   // trimmed plain motion by coverage (and replaces it when that is not clear).
   if (o.on_stage) o.on_stage("shortening the tool at its tip to keep out of the part");
@@ -282,27 +289,36 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
   out.t_from = 0;
   out.t_to = 1;
   const bool check = o.fit.check.part != nullptr;
-  CheckProfile profile;
-  // The rows to keep: not gouging Φ (trim_gouges) and clear of the check surface (with a part).
   const int rows = out.machined.omega.n_t;
-  // The rows not gouging Φ beyond `tolerance`: Ω's samples against Φ; with a part (a job that is
-  // collision-checked and posted) also the cutter against Φ as the collision check judges it, whose
-  // solid cutter with flat ends sees what Ω's side envelope does not (its rims at Φ's edges).
-  const auto ungouged = [&](double tolerance) {
-    std::vector<char> ok = ungouged_rows(out.machined, tolerance);
-    if (!check) return ok;
-    const CutterHits hits = cutter_hits(surface, out.fit.rails, out.fit.tool, rows, tolerance,
-                                        o.fit.check.clearance > 0 ? o.fit.check.clearance : 10 * o.tolerance, nullptr, 0);
-    for (size_t i = 0; i < ok.size(); ++i) ok[i] = ok[i] && !std::isfinite(hits.depth[i]);
-    return ok;
-  };
+  // With a part (a job that is collision-checked and posted) the trims keep kTrimMargin of the
+  // tolerances in hand; without one they trim at Φ's tolerance.
+  const double phi_keep = check ? (1 - kTrimMargin) * o.tolerance : o.tolerance;
+  const double part_keep = (1 - kTrimMargin) * o.fit.check.tolerance;
+  // The last evaluation of the motion (keep()), and whether the motion has changed since: the final
+  // judgement at the full tolerances is derived from it (a hit deeper than a tolerance is deeper than
+  // the trim's threshold too), or it is evaluated anew.
+  CutterHits phi_hits;  // with a part and trim_gouges: the cutter against Φ as the collision check sees it
+  PartCheck part;
+  CheckProfile profile;  // part's intrusion at the trim's threshold
+  bool current = false;
+  // The rows to keep: not gouging Φ (trim_gouges: Ω's samples against Φ and, with a part, the cutter
+  // against Φ as the collision check judges it, whose solid cutter with flat ends sees what Ω's side
+  // envelope does not, its rims at Φ's edges) and clear of the check surface (with a part).
   const auto keep = [&] {
-    std::vector<char> ok(size_t(out.machined.omega.n_t), 1);
-    if (o.trim_gouges) ok = ungouged(check ? (1 - kTrimMargin) * o.tolerance : o.tolerance);
-    if (check) {
-      const std::vector<char> clear = clear_rows(surface, out, o, kTrimMargin, profile);
-      for (size_t i = 0; i < ok.size(); ++i) ok[i] = ok[i] && clear[i];
+    std::vector<char> ok(size_t(rows), 1);
+    if (o.trim_gouges) {
+      ok = ungouged_rows(out.machined, phi_keep);
+      if (check) {
+        phi_hits = cutter_hits(surface, out.fit.rails, out.fit.tool, rows, phi_keep, hit_step(o), nullptr, 0);
+        for (size_t i = 0; i < ok.size(); ++i) ok[i] = ok[i] && !std::isfinite(phi_hits.depth[i]);
+      }
     }
+    if (check) {
+      part = part_check(surface, out, o, part_keep);
+      profile = intrusion(part, part_keep);
+      for (size_t i = 0; i < ok.size(); ++i) ok[i] = ok[i] && !(profile.intrusion[i] > 0);
+    }
+    current = true;
     return ok;
   };
   // Trimmed rails are sampled anew, so the ends are checked again (a few rounds).
@@ -324,16 +340,16 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
     out.t_from += w * t0;
     out.fit.rails = trimmed(out.fit.rails, t0, t1);
     out.machined = machined_surface(surface, out.fit.rails, out.fit.tool, o.machined);
+    current = false;
   }
   const auto [t0, t1] = ungouged_range(out.machined, o.tolerance);
   out.gouges = !(t0 == 0.0 && t1 == 1.0);
-  if (o.trim_gouges && check && !out.gouges) {
-    const std::vector<char> ok = ungouged(o.tolerance);
-    out.gouges = std::any_of(ok.begin(), ok.end(), [](char c) { return c == 0; });
-  }
+  if (check && !current) (void)keep();
+  if (o.trim_gouges && check && !out.gouges)
+    out.gouges = std::any_of(phi_hits.depth.begin(), phi_hits.depth.end(), [&](double d) { return d > o.tolerance; });
   if (check) {
-    (void)clear_rows(surface, out, o, 0, profile);
-    out.check_intrusion = *std::max_element(profile.intrusion.begin(), profile.intrusion.end());
+    const CheckProfile final_profile = intrusion(part, o.fit.check.tolerance);
+    out.check_intrusion = *std::max_element(final_profile.intrusion.begin(), final_profile.intrusion.end());
   }
   out.coverage = coverage(surface.mesh(), out.machined.design_deviation, o.tolerance);
   return out;

@@ -57,7 +57,7 @@ struct PatchFit {
   double t_from = 0, t_to = 1;              // the part of the optimised motion kept (trim_gouges)
   bool gouges = false;                      // Ω still lies below Φ beyond the tolerance somewhere
   // With a check surface (PatchOptions::fit.check): why the motion was trimmed (the worst intrusion
-  // of the optimised motion, before trimming), the worst intrusion left (<= 0: clear; unit frame,
+  // of the optimised motion, before trimming; unset when the part forced no trim), the worst intrusion left (<= 0: clear; unit frame,
   // beyond the tolerance for the cutter, inside the clearance for shank and holder), and whether
   // no stretch of the motion could be kept clear (the patch is then left untrimmed and refused).
   struct CheckTrim {
