@@ -133,9 +133,9 @@ bool axial(const ToolPose& p, const ToolPose& q) {
 // The lead point off pose p, where the rapid along the tool axis from above ends and the lead-in
 // begins (the lead-out ends and the retract along the axis begins): `lead` along lead_direction, or,
 // when the lead would cut the part or the assembly (its cutter grown by the clearance) would meet the
-// part on its way along the axis from beyond the part's reach down to that point, the direction
-// turned about the axis by 20-90 degrees either way, then lifted along the axis by half and a whole
-// lead (a hub sloping under the tool's end), then all twice as far out: the first clear candidate.
+// part on its way along the axis from beyond the part's reach down to that point, the other offsets of
+// lead_offsets (turned about the axis by 20-90 degrees either way, lifted along it by half and a whole
+// lead: a hub sloping under the tool's end), then all twice as far out: the first clear candidate.
 // A flank in a narrow passage (HECC impeller: the plain lead point's rapid ran the cutter 1.7 mm into
 // the part) is entered from the side that is open. None clear: the plain point (the
 // back-simulation then says what it hits).
@@ -154,20 +154,20 @@ Eigen::Vector3d lead_point(const SurfaceIndex& part, const ToolPose& p, const To
   co.gouge_tolerance_mm = 1e-6;
   CollisionOptions lead_co = co;
   lead_co.gouge_tolerance_mm = 0.1;
+  const std::vector<Eigen::Vector3d> offsets = lead_offsets(n, axis);
   for (const double f : {1.0, 2.0})
-    for (const double lift : {0.0, 0.5, 1.0})
-      for (const double deg : {0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0, 90.0, -90.0}) {
-        const Eigen::Vector3d q = p.tip + f * lead * (Eigen::AngleAxisd(deg * M_PI / 180, axis) * n + lift * axis);
-        try {
-          // The lead itself, from a tenth of the way out (the pose touches the flank), must not cut the
-          // part (0.1 mm: a coarse twin of the flank stands proud of it by its sag); then the rapid above.
-          if (check_collisions(part, {{p.tip + 0.1 * (q - p.tip), axis}, {q, axis}}, a, lead_co).clear() &&
-              check_collisions(part, {{q + beyond * axis, axis}, {q - clearance * axis, axis}}, grown, co).clear())
-            return q;
-        } catch (const InputError&) {
-          return p.tip + lead * n;  // beyond the check's bounds: the plain point, judged by the back-simulation
-        }
+    for (const Eigen::Vector3d& offset : offsets) {
+      const Eigen::Vector3d q = p.tip + f * lead * offset;
+      try {
+        // The lead itself, from a tenth of the way out (the pose touches the flank), must not cut the
+        // part (0.1 mm: a coarse twin of the flank stands proud of it by its sag); then the rapid above.
+        if (check_collisions(part, {{p.tip + 0.1 * (q - p.tip), axis}, {q, axis}}, a, lead_co).clear() &&
+            check_collisions(part, {{q + beyond * axis, axis}, {q - clearance * axis, axis}}, grown, co).clear())
+          return q;
+      } catch (const InputError&) {
+        return p.tip + lead * n;  // beyond the check's bounds: the plain point, judged by the back-simulation
       }
+    }
   return p.tip + lead * n;
 }
 

@@ -62,6 +62,14 @@ Eigen::Vector3d lead_direction(const SurfaceIndex& part, const ToolPose& p, doub
   return v.norm() > 1e-6 ? Eigen::Vector3d(v.normalized()) : p.axis;
 }
 
+std::vector<Eigen::Vector3d> lead_offsets(const Eigen::Vector3d& normal, const Eigen::Vector3d& axis) {
+  std::vector<Eigen::Vector3d> out;
+  for (const double lift : {0.0, 0.5, 1.0})
+    for (const double deg : {0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0, 90.0, -90.0})
+      out.push_back(Eigen::AngleAxisd(deg * M_PI / 180, axis) * normal + lift * axis);
+  return out;
+}
+
 bool is_cl_data_file(const std::string& path) {
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
@@ -392,17 +400,16 @@ bool is_lead(const SimBlock& sb, const ClMotion& cl, const SurfaceIndex& part, c
     if (nearest_on_cl(cl, *on, o).score(o) > 1) continue;
     const ToolPose& off = on == &end ? sb.start : end;
     const Eigen::Vector3d n = lead_direction(part, *on, L), run = off.tip - on->tip, axis = on->axis.normalized();
-    for (const double lift : {0.0, 0.5, 1.0})
-      for (const double deg : {0.0, 20.0, -20.0, 40.0, -40.0, 60.0, -60.0, 90.0, -90.0}) {
-        const Eigen::Vector3d dir = (Eigen::AngleAxisd(deg * kDeg, axis) * n + lift * axis).normalized();
-        if (!(run.dot(dir) > tol)) continue;
-        bool along = true;
-        for (const ToolPose& q : sb.positions) {
-          const Eigen::Vector3d v = q.tip - on->tip;
-          along &= (v - v.dot(dir) * dir).norm() <= tol && angle_deg(q.axis, on->axis) <= o.cl_angle_tolerance_deg;
-        }
-        if (along) return true;
+    for (const Eigen::Vector3d& offset : lead_offsets(n, axis)) {
+      const Eigen::Vector3d dir = offset.normalized();
+      if (!(run.dot(dir) > tol)) continue;
+      bool along = true;
+      for (const ToolPose& q : sb.positions) {
+        const Eigen::Vector3d v = q.tip - on->tip;
+        along &= (v - v.dot(dir) * dir).norm() <= tol && angle_deg(q.axis, on->axis) <= o.cl_angle_tolerance_deg;
       }
+      if (along) return true;
+    }
   }
   return false;
 }

@@ -74,6 +74,11 @@ struct ClDeviation {
 // cutter to the axis, across the axis (the flank's normal at the contact line); the axis when the part
 // lies on it. Lead-in and lead-out run along it.
 [[nodiscard]] Eigen::Vector3d lead_direction(const SurfaceIndex& part, const ToolPose& p, double cutter_length_mm);
+// The planner's lead offsets per unit of lead, in the order it tries them: `normal` (lead_direction,
+// across `axis`), turned about the axis by 20, 40, 60 and 90 degrees either way, each lifted along the
+// axis by none, half or all of the lead (lifts outer). The link planner takes the first clear one (and
+// twice as far); `verify` recognises a lead block along any of them.
+[[nodiscard]] std::vector<Eigen::Vector3d> lead_offsets(const Eigen::Vector3d& normal, const Eigen::Vector3d& axis);
 
 // One motion block as simulated.
 struct VerifiedBlock {
