@@ -65,9 +65,19 @@ std::vector<Eigen::Vector2d> body_samples(const HolderJob& h, const Similarity& 
 }
 
 // The tool's meridian (z, r) in mm from the tip.
+// The tool as ground, mm: the union of its spheres d(s) between its end planes (cutter_union), the
+// one cutter of the fit's trim, the collision check, the back-simulation, the tool files and the
+// CL-data's profile (so `verify`, reading that profile, judges the cutter the run judged).
 std::vector<Eigen::Vector2d> tool_profile_mm(const Similarity& fr, const FitResult& r) {
   std::vector<Eigen::Vector2d> profile;
-  for (const Eigen::Vector2d& zr : meridian(r.tool, r.rails.length)) profile.emplace_back(fr.length_to_mm(zr.x()), fr.length_to_mm(zr.y()));
+  for (const Eigen::Vector2d& zr : cutter_union(r.tool, r.rails.length)) profile.push_back(fr.length_to_mm(1.0) * zr);
+  return profile;
+}
+
+// The side meridian (the envelope of the circles d(z), meridian()) a rounded end is cut into.
+std::vector<Eigen::Vector2d> side_meridian_mm(const Similarity& fr, const FitResult& r) {
+  std::vector<Eigen::Vector2d> profile;
+  for (const Eigen::Vector2d& zr : meridian(r.tool, r.rails.length)) profile.push_back(fr.length_to_mm(1.0) * zr);
   return profile;
 }
 
@@ -92,7 +102,7 @@ nlohmann::ordered_json error_report(const ErrorStats& e, const Similarity& frame
 namespace {
 ToolAssembly assembly_of(const Job& job, const Similarity& fr, const FitResult& r) {
   ToolAssembly a;
-  for (const Eigen::Vector2d& zr : cutter_union(r.tool, r.rails.length)) a.cutter.push_back(fr.length_to_mm(1.0) * zr);
+  a.cutter = tool_profile_mm(fr, r);
   const HolderJob& h = job.holder;
   a.shank_length = h.shank_length, a.shank_diameter = h.shank_diameter;
   a.holder_length = h.length, a.holder_diameter = h.diameter, a.holder_diameter_far = h.diameter_far;
@@ -182,7 +192,8 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
     p.poses = poses_mm(job, f.frame, r.rails);
     p.assembly = assembly_of(job, f.frame, r);
     // tool.end: the profile ends in it, and a rounded end is the cutter the check sees (tool_end.h).
-    const EndProfile end = end_profile(tool_profile_mm(f.frame, r), job.tool.end);
+    const EndProfile end =
+        end_profile(job.tool.end.kind == EndKind::Flat ? p.assembly.cutter : side_meridian_mm(f.frame, r), job.tool.end);
     p.profile_mm = end.profile;
     p.end_points = end.end_points;
     p.end_radius_mm = end.radius;

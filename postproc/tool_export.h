@@ -10,7 +10,7 @@ namespace flankcam {
 struct ToolDimensions {
   double length_mm = 0;                         // along the axis, tip (z = 0) to the end of the cutting part
   double diameter_min_mm = 0, diameter_max_mm = 0;
-  double cone_half_angle_deg = 0;               // from the end diameters; 0 for a cylinder
+  double cone_half_angle_deg = 0;               // the side's taper over its middle half; 0 for a cylinder
 };
 // `profile`: meridian points (z, r) in mm from the tip, z increasing. `end_points`: the leading
 // points that are a rounded end (core/tool_end.h EndProfile): the diameters and the cone are the

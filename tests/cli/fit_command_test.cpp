@@ -92,10 +92,11 @@ TEST_CASE("flankcam fit: report in mm whose axis lies at the reported radii from
     const auto& profile = p["tool"]["profile"];
     REQUIRE(profile.size() > 10);
     CHECK(std::string(p["tool"]["shape"]) == "cone");
-    // Spheres of radius d(z) = d0 + k z envelope a cone of half angle asin(k), touching it at
-    // r = d cos(half angle) = d sqrt(1 - k^2).
+    // Spheres of radius d(z) = d0 + k z envelope a cone of half angle asin(k). The tool is their
+    // union between its end planes z = 0 and L: widest at z = L, where the last sphere (centre on
+    // that plane, radius d1) is the widest of all (d(s)^2 - (L - sL)^2 grows with s for k < 1).
     const double d0 = p["radius"][0], d1 = p["radius"][19], k = (d1 - d0) / L;
-    CHECK(double(p["tool"]["diameter_max"]) == doctest::Approx(2 * d1 * std::sqrt(1 - k * k)).epsilon(1e-5));
+    CHECK(double(p["tool"]["diameter_max"]) == doctest::Approx(2 * d1).epsilon(1e-5));
     CHECK(double(p["tool"]["cone_half_angle_deg"]) == doctest::Approx(std::asin(k) * 180 / M_PI).epsilon(1e-5));
     for (const std::string f : p["files"]) CHECK(std::filesystem::file_size(dir.file("out/" + f)) > 100);
     const std::string csv = test::read_text(dir.file("out/" + name + "-tool.csv"));

@@ -5,6 +5,9 @@
 #include <fmt/format.h>
 #include <sys/wait.h>
 
+#include <Eigen/Core>
+
+#include <cctype>
 #include <cstdlib>
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -60,6 +63,37 @@ TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm in
     REQUIRE(r.code == 0);
   }
   const std::string program = (fs::path(run) / "cone-1.ngc").string();
+
+  // The cutter verify reads beside the program (cone-1-tool.csv, also the APT profile and the DXF)
+  // is the cutter the run checked and back-simulated: the union of the fitted spheres d(s),
+  // s in [0, 1], centred on the axis at sL, between the end planes z = 0 and z = L. For the cone
+  // d(s) = d0 + (d1 - d0) s it is computed here from report.json's radii alone. (Before, the file held
+  // the spheres' envelope, the cone d cos(half angle) ending d1 sin(half angle) below L, which is not
+  // what the run checked: verify refused a program the run had written clean.)
+  {
+    const auto report = nlohmann::json::parse(test::read_text(run + "/report.json"));
+    const auto& patch = report["patches"][0];
+    const double d0 = patch["radius"][0], d1 = patch["radius"][patch["radius"].size() - 1];
+    const double L = patch["tool"]["length"];
+    std::vector<Eigen::Vector2d> csv;
+    for (const std::string& l : split_lines(test::read_text(run + "/cone-1-tool.csv")))
+      if (!l.empty() && (std::isdigit(static_cast<unsigned char>(l[0])) || l[0] == '-'))
+        csv.emplace_back(std::stod(l), std::stod(l.substr(l.find(',') + 1)));
+    REQUIRE(csv.size() > 20);
+    CHECK(csv.front().x() == doctest::Approx(0).scale(1).epsilon(1e-4));
+    CHECK(csv.back().x() == doctest::Approx(L).epsilon(1e-5));
+    double worst = 0;
+    for (const Eigen::Vector2d& zr : csv) {
+      double r2 = 0;
+      for (int k = 0; k <= 20000; ++k) {
+        const double s = k / 20000.0, d = d0 + (d1 - d0) * s, dz = zr.x() - s * L;
+        r2 = std::max(r2, d * d - dz * dz);
+      }
+      worst = std::max(worst, std::abs(zr.y() - std::sqrt(r2)));
+    }
+    MESSAGE("tool file vs the spheres' union: " << worst << " mm over " << csv.size() << " points");
+    CHECK(worst < 2e-4);
+  }
 
   SUBCASE("the posted program is clean") {
     const Output r = run_program("verify --job " + job + " " + program + " --out " + dir.file("v"), dir);
