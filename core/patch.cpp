@@ -342,6 +342,15 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
     out.machined = machined_surface(surface, out.fit.rails, out.fit.tool, o.machined);
     current = false;
   }
+  // ε of the motion as kept: the trimmed-off stretch (where the motion may leave Φ by millimetres)
+  // is not machined, so it is not what the patch's ε reports.
+  if (out.t_from > 0 || out.t_to < 1) {
+    try {
+      out.fit.eps_opt = sample_error(surface, out.fit.rails, out.fit.tool, o.fit);
+    } catch (const InputError&) {
+      // no sample of the kept stretch lies over Φ: the whole motion's ε stays
+    }
+  }
   const auto [t0, t1] = ungouged_range(out.machined, o.tolerance);
   out.gouges = !(t0 == 0.0 && t1 == 1.0);
   if (check && !current) (void)keep();

@@ -82,7 +82,8 @@ struct PatchFit {
 [[nodiscard]] PatchFit fit_patch(const SurfaceIndex& surface, const PatchSpec& spec, const PatchOptions& options);
 
 // The machined surface of `fit.fit`, then (with trim_gouges) the rails trimmed in t to the longest
-// run of envelope rows that do not gouge Φ beyond the tolerance, and the coverage. Used by fit_patch.
+// run of envelope rows that do not gouge Φ beyond the tolerance, and the coverage. A trimmed motion's
+// fit.eps_opt is measured again over what is kept (eq. 13 on the trimmed rails). Used by fit_patch.
 [[nodiscard]] PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit fit, const PatchOptions& options);
 
 // The check surface (options.fit.check) applied to a fit made without it: when its tool enters the

@@ -177,6 +177,13 @@ TEST_CASE("a post in the cutter's way: the motion is kept clear of it or trimmed
   CHECK(y_end < 52.0 + 0.005);
   // The flank up to the post (less the cutter's radius) is still cut: 38 of its 60 mm at least.
   CHECK(f.coverage > 38.0 / 60);
+  // The patch's ε is that of the motion as kept (eq. 13 over the trimmed rails), not of the stretch
+  // trimmed off, which is not machined.
+  REQUIRE(f.t_to - f.t_from < 0.99);
+  const ErrorStats kept = sample_error(s.phi, f.fit.rails, f.fit.tool, po.fit);
+  MESSAGE("eps kept ", s.fr.length_to_mm(f.fit.eps_opt.max), " mm");
+  CHECK(f.fit.eps_opt.max == kept.max);
+  CHECK(f.fit.eps_opt.samples == kept.samples);
   // Without the post the motion ran on to y = 55, into it; the trimming (or the fit) says where it hit.
   PatchOptions free = po;
   free.fit.check = {};
