@@ -991,6 +991,13 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
       const ConstraintRows c = constraint_rows(st.tool, st.rails.front().length, o.constraints);
       if (c.h.size() > 0) problem.AddResidualBlock(new fit_residuals::HingeResidual(c.G, c.h, o.w_constraint), nullptr, D.data());
     }
+    // No sample of the motion over Φ (it has left the surface): nothing to fit it to, and with the
+    // radii held Ceres would abort on their absent block. The last motion is kept and reported.
+    if (planes.empty()) {
+      st.status = FitStatus::SolverFailed;
+      st.message = "no sample of the motion lies over the design surface";
+      break;
+    }
     if (!radii_free) problem.SetParameterBlockConstant(D.data());
     ceres::Solver::Options so;
     // Each sample touches 8 of the 2 x rail_control_points control points and the radii: J^T J is
