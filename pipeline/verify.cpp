@@ -180,7 +180,9 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
     VerifiedProgram r;
     r.file = file;
     if (is_cl_data_file(file)) {
-      const ClProgram cl = parse_apt(text, file);
+      // CL-data is in part coordinates: placed on the machine like the part (post.setup).
+      ClProgram cl = parse_apt(text, file);
+      for (ClMove& mv : cl.moves) mv.pose = to_work(j.post, mv.pose);
       VerifyTool vt;
       if (given.empty() && cl.profile.size() >= 2) {
         vt.assembly = assembly_from_meridian(cl.profile, holder);

@@ -225,3 +225,40 @@ TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm in
     CHECK(!fs::exists(fs::path(run) / "verify.json"));
   }
 }
+
+TEST_CASE("flankcam verify: APT CL-data (part coordinates) is placed on the machine like the part" * doctest::test_suite("heavy")) {
+  // The conical-tool job's first patch with the part turned and moved on the table: programs are in
+  // the work frame, the APT stays in part coordinates. Verifying the APT must cut the blade as the
+  // program does (before, its moves were judged in part coordinates against the placed part: the
+  // tool never met the blade and the APT was "clean" with 0% of the surface reached).
+  test::ScratchDir dir("verify-apt-setup");
+  const std::string examples = std::string(FLANKCAM_SOURCE_DIR) + "/examples";
+  std::string job = test::read_text(examples + "/conical-tool/job.yaml");
+  const std::string surface = "surface: ../blade/blade.obj", post = "post: {dialects: [linuxcnc]}";
+  REQUIRE(job.find(surface) != std::string::npos);
+  REQUIRE(job.find(post) != std::string::npos);
+  job.replace(job.find(surface), surface.size(), "surface: " + examples + "/blade/blade.obj");
+  job.replace(job.find(post), post.size(), "post: {dialects: [linuxcnc], setup: {rotate: [0, 0, 90], translate: [20, -10, 30]}}");
+  job = job.substr(0, job.find("  - name: cone-2"));  // one patch
+  const std::string job_file = dir.file("job.yaml");
+  test::write_text(job_file, job);
+  const std::string run = dir.file("run");
+  {
+    const Output r = run_program("run " + job_file + " --quiet --out " + run, dir);
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+  }
+  const auto verify = [&](const std::string& program, const std::string& out) {
+    const Output r = run_program("verify --job " + job_file + " " + program + " --out " + dir.file(out), dir);
+    INFO(r.out, r.err);
+    CHECK(r.code == 0);
+    return nlohmann::json::parse(test::read_text(dir.file(out + "/verify.json")))["programs"][0];
+  };
+  const auto ngc = verify(run + "/cone-1.ngc", "v-ngc"), apt = verify(run + "/cone-1.apt", "v-apt");
+  MESSAGE("reached: ngc ", ngc["design_surface"]["vertices_reached"], ", apt ", apt["design_surface"]["vertices_reached"]);
+  CHECK(apt["clean"] == true);
+  CHECK(int(apt["design_surface"]["vertices_reached"]) > 100);
+  CHECK(double(apt["design_surface"]["coverage"]) > 0.5);
+  // The CL-data and the program cut the same surface.
+  CHECK(double(apt["design_surface"]["coverage"]) == doctest::Approx(double(ngc["design_surface"]["coverage"])).epsilon(0.05));
+}
