@@ -235,7 +235,51 @@ std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& 
   } catch (const InputError&) {
     return std::nullopt;  // what stays of the tool is no longer over Φ
   }
-  return machine_and_trim(surface, std::move(f), o);
+  return f;
+}
+
+// The cutter made longer at its holder end (the side continued beyond s = 1: exact for cylinders
+// and cones, within a tenth of the tolerance for a general meridian, as cut_tool) so that the shank
+// starts farther out: a flank whose edge the cutter's end reaches (the HECC diffuser's shroud side)
+// had its shank pass that edge inside the clearance and the motion trimmed. Lengths of 1, 2, 4 and 8
+// clearances are tried, within max_length; the shortest whose clear stretch is longest is kept
+// (untrimmed: machine_and_trim judges the longer cutter against Φ and the part). None when the tool
+// is a fixed one or no length helps.
+std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOptions& o, double clear_before) {
+  if (o.fit.fixed_tool || !(o.fit.check.clearance > 0)) return std::nullopt;
+  const Rails& r = base.fit.rails;
+  const bool tip_at_a = !o.fit.check.up || mean_axis(r).dot(*o.fit.check.up) >= 0;
+  const int rows = 2 * o.fit.samples_t;
+  double best_run = clear_before;
+  std::optional<ToolCut> best;
+  for (const double k : {1.0, 2.0, 4.0, 8.0}) {
+    const double e = k * o.fit.check.clearance / r.length;
+    ToolCut longer = tip_at_a ? cut_tool(r, base.fit.tool, 0, 1 + e) : cut_tool(r, base.fit.tool, -e, 1);
+    if (longer.radius_error > 0.1 * o.tolerance || tool_defect(longer.tool, longer.rails.length)) continue;
+    if (check_constraints(longer.tool, longer.rails.length, o.fit.constraints).violation > 0.01 * o.tolerance) continue;
+    const CheckProfile p = check_profile(longer.rails, longer.tool, o.fit.check, rows, o.fit.samples_s);
+    std::vector<char> ok(static_cast<size_t>(rows));
+    for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(p.intrusion[size_t(i)] > 0);
+    const auto [t0, t1] = longest_run(ok);
+    if (t1 - t0 > best_run + 1e-9) best_run = t1 - t0, best = std::move(longer);
+    if (t0 == 0.0 && t1 == 1.0) break;  // clear everywhere: longer only risks more
+  }
+  if (!best) return std::nullopt;
+  PatchFit f = base;
+  f.holder_lengthened = best->rails.length - r.length;
+  f.fit.rails = best->rails;
+  f.fit.tool = best->tool;
+  return f;
+}
+
+// The longest clear stretch (share of t) of a fit's motion by the check profile alone.
+double clear_stretch(const PatchFit& f, const PatchOptions& o) {
+  const int rows = 2 * o.fit.samples_t;
+  const CheckProfile p = check_profile(f.fit.rails, f.fit.tool, o.fit.check, rows, o.fit.samples_s);
+  std::vector<char> ok(static_cast<size_t>(rows));
+  for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(p.intrusion[size_t(i)] > 0);
+  const auto [t0, t1] = longest_run(ok);
+  return t1 - t0;
 }
 }  // namespace
 
@@ -256,8 +300,18 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   // trimmed plain motion by coverage (and replaces it when that is not clear).
   if (o.on_stage) o.on_stage("shortening the tool at its tip to keep out of the part");
   bool shortened = false;
-  if (std::optional<PatchFit> cut = cut_at_tip(surface, plain, o); cut && machinable(*cut))
-    if (!machinable(best) || cut->coverage > best.coverage) best = std::move(*cut), shortened = true;
+  PatchFit base = plain;  // the untrimmed motion and tool of `best`
+  if (std::optional<PatchFit> cut = cut_at_tip(surface, plain, o)) {
+    PatchFit m = machine_and_trim(surface, *cut, o);
+    if (machinable(m) && (!machinable(best) || m.coverage > best.coverage)) best = std::move(m), base = std::move(*cut), shortened = true;
+  }
+  // Still trimmed for the shank or holder: the cutter made longer at its holder end.
+  if (best.check_trim && best.check_trim->body)
+    if (std::optional<PatchFit> longer = lengthened_at_holder(base, o, clear_stretch(base, o))) {
+      if (o.on_stage) o.on_stage("cutter made longer at its holder end to keep the shank clear");
+      PatchFit m = machine_and_trim(surface, std::move(*longer), o);
+      if (machinable(m) && (!machinable(best) || m.coverage > best.coverage)) best = std::move(m);
+    }
   // The tip was what entered the part (shortening it gained most), or no refit is wanted: a penalised
   // refit, which tilts the whole axis, is not tried (on the HECC impeller it never beat the shortened
   // tool, at ~10 s a patch).

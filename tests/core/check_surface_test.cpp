@@ -255,6 +255,36 @@ TEST_CASE("shank and holder keep their clearance from the design surface too: a 
   CHECK(worst(3.5).first <= 0);
 }
 
+TEST_CASE("a shank passing the flank's edge inside the clearance: the cutter is made longer at its holder end" * doctest::test_suite("heavy")) {
+  // The blade block behind the flank x = 0 ends at z = 20, where the upright cutter (Ø10, tip at
+  // z = 0) ends too; its Ø9.4 shank starts there, 0.3 mm off the block's top edge: inside the 1 mm
+  // clearance all along the motion (the HECC diffuser's shroud side: every patch trimmed for 0.12 mm).
+  // Trimming cannot help; a cutter 1-2 mm longer starts the shank above the edge (> 1 mm off it).
+  Setup s;
+  const TriMesh block = to_unit(box_mesh({-10, 0, 0}, {0, 60, 20}, 4), s.fr);
+  const CheckPart cp = check_part(block, s.phi, s.fr.length_to_unit(0.01));
+  REQUIRE(cp.twin_faces == 32);
+  const SurfaceIndex part(cp.mesh), solid(block);
+  PatchOptions po = s.checked_options(part);
+  po.fit.check.solid = &solid, po.fit.check.solid_twin = &cp.twin, po.fit.check.twin_sag = cp.twin_sag;
+  po.fit.check.body.clear();
+  for (int k = 0; k <= 40; ++k) po.fit.check.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(k <= 10 ? 4.7 : 10.0));
+  const PatchFit f = fit_patch(s.phi, s.upright(), po);
+  const double longer = s.fr.length_to_mm(f.holder_lengthened);
+  MESSAGE("lengthened ", longer, " mm, t ", f.t_from, "-", f.t_to, ", intrusion ", s.fr.length_to_mm(f.check_intrusion),
+          " mm, coverage ", f.coverage);
+  CHECK(longer >= 0.9);
+  CHECK(longer <= 8.1);
+  CHECK(f.check_intrusion <= 0);
+  CHECK(!f.check_refused);
+  CHECK(f.t_to - f.t_from > 0.99);  // the whole motion kept
+  // As much of the flank as the same patch without the part.
+  const PatchFit free = fit_patch(s.phi, s.upright(), s.patch_options());
+  CHECK(f.coverage >= 0.99 * free.coverage);
+  // The shank starts above the block's top: the cutter's holder end (b) beyond z = 20 by the length added.
+  for (double t : {0.0, 0.5, 1.0}) CHECK(s.fr.to_mm(f.fit.rails.b.point(t)).z() == doctest::Approx(20 + longer).epsilon(0.01));
+}
+
 TEST_CASE("check surface options name the bad field") {
   const SurfaceIndex wall(box_mesh({14, -20, -10}, {30, 80, 100}));
   FitOptions o;
