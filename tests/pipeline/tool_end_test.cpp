@@ -171,6 +171,18 @@ TEST_CASE("depth_cuts: 3 makes three sections of the patch's program, the tip 2/
   }
   CHECK(worst_lift < 1e-9);
   CHECK(worst_off < 1e-9);
+  // Each level has its own links, as its section of the program: down the tool axis from `retract`
+  // (50 mm, the default) above its lead point, fed in across the axis (at least the clearance, 1 mm).
+  int entries = 0;
+  for (size_t i = 0; i + 2 < all.moves.size(); ++i) {
+    if (!all.moves[i].rapid || !all.moves[i + 1].rapid || all.moves[i + 2].rapid) continue;
+    ++entries;
+    const Eigen::Vector3d e = all.moves[i + 1].pose.axis.normalized();
+    const Eigen::Vector3d down = all.moves[i + 1].pose.tip - all.moves[i].pose.tip, in = all.moves[i + 2].pose.tip - all.moves[i + 1].pose.tip;
+    CHECK((down + 50 * e).norm() < 1e-6);
+    CHECK((in - in.dot(e) * e).norm() >= 1);
+  }
+  CHECK(entries == 3);
   // One program, three sections in order, one tool change.
   int programs = 0;
   for (const pipeline::PostedProgram& w : run.programs) {
