@@ -103,6 +103,25 @@ ClProgram depth_level(const ClProgram& pass, const FittedPatch& p, int level, in
   return out;
 }
 
+// A posted section's CL-data (work frame, links planned by the post) back in part coordinates, as
+// NAME.apt runs it: entered by a rapid to the lead point moved `retract_mm` up the tool axis and a rapid
+// down the axis to it (lead_point checked that axial rapid from beyond the part's reach), then the
+// planned feed in along the surface normal, the cut and the feed out, left by a rapid `retract_mm` up
+// the axis. The contacts stay as they are (the sections were posted with part-frame contacts).
+ClProgram apt_section(ClProgram cl, const PostJob& post, double retract_mm) {
+  for (ClMove& mv : cl.moves) mv.pose = from_work(post, mv.pose);
+  if (cl.moves.empty()) return cl;
+  const auto up = [&](const ClMove& at) {
+    ClMove mv;
+    mv.pose = {at.pose.tip + retract_mm * at.pose.axis.normalized(), at.pose.axis};
+    mv.rapid = true;
+    return mv;
+  };
+  if (cl.moves.front().rapid) cl.moves.insert(cl.moves.begin(), up(cl.moves.front()));
+  if (!cl.moves.back().rapid) cl.moves.push_back(up(cl.moves.back()));
+  return cl;
+}
+
 void check_options(const RunOptions& o) {
   if (auto err = o.validate(); !err.empty()) throw InputError(err);
 }
@@ -175,6 +194,12 @@ ToolPose to_work(const PostJob& post, const ToolPose& p) {
   const Eigen::Matrix3d R = setup_rotation(post);
   const Eigen::Vector3d t(post.setup_translate_mm[0], post.setup_translate_mm[1], post.setup_translate_mm[2]);
   return {R * p.tip + t, (R * p.axis).normalized()};
+}
+
+ToolPose from_work(const PostJob& post, const ToolPose& p) {
+  const Eigen::Matrix3d Rt = setup_rotation(post).transpose();
+  const Eigen::Vector3d t(post.setup_translate_mm[0], post.setup_translate_mm[1], post.setup_translate_mm[2]);
+  return {Rt * (p.tip - t), (Rt * p.axis).normalized()};
 }
 
 TriMesh to_work(const PostJob& post, TriMesh mesh) {
@@ -298,7 +323,7 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     for (const ClProgram& pass : passes)
       for (int level = 1; level <= j.depth_cuts; ++level)
         sections.push_back(j.depth_cuts == 1 ? pass : depth_level(pass, p, level, j.depth_cuts, *design));
-    r.posted_cl[k] = all_passes(sections);
+    r.posted_cl[k] = all_passes(sections);  // replaced by the programs' planned links below
     for (ClProgram& work : sections) {
       for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
       inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back(), assembly});
@@ -334,6 +359,18 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
        fmt::format("work frame = part rotated X {} Y {} Z {} deg, moved by ({}, {}, {}) mm", j.post.setup_rotate_deg[0],
                    j.post.setup_rotate_deg[1], j.post.setup_rotate_deg[2], j.post.setup_translate_mm[0],
                    j.post.setup_translate_mm[1], j.post.setup_translate_mm[2])});
+  // NAME.apt and NAME-cl.csv carry the links of the patch's program (the first dialect's): the CL-data
+  // as posted, section by section, back in part coordinates. (The post must still be given the
+  // unplanned CL-data: planned twice, the second plan would lead off the first's lead point.)
+  for (size_t k = 0; k < r.fit.fitted.patches.size(); ++k) {
+    if (!r.posted_cl[k]) continue;
+    const std::string& name = r.fit.fitted.patches[k].job->name;
+    const auto w = std::find_if(r.programs.begin(), r.programs.end(), [&](const PostedProgram& p) { return p.patch == name; });
+    if (w == r.programs.end()) continue;
+    std::vector<ClProgram> sections;
+    for (const PostedSection& sec : w->posted.sections) sections.push_back(apt_section(sec.cl, j.post, j.retract_mm));
+    r.posted_cl[k] = all_passes(sections);
+  }
   return r;
 }
 

@@ -81,8 +81,10 @@ struct RunResult {
   std::vector<PostedProgram> programs;
   std::vector<double> tool_length_mm;  // per patch, spindle nose to tip
   std::optional<SetupDecision> setup;   // post.setup: auto (the job's post.setup_rotate_deg is the chosen one)
-  // Per patch with a program: the CL-data it was posted from, every pass in order (part coordinates),
-  // as NAME.apt holds it; without passes the fit's CL-data.
+  // Per patch with a program: the CL-data of its program, every section (pass, depth level) in order,
+  // in part coordinates, as NAME.apt and NAME-cl.csv hold it: each section with the links its program
+  // was posted with (a rapid to the lead point moved `retract` up the tool axis, a rapid down the axis to
+  // it, the feed in along the surface normal, the cut, the feed out, a rapid `retract` up the axis).
   std::vector<std::optional<ClProgram>> posted_cl;
 };
 
@@ -100,6 +102,8 @@ void check_fit_outputs(const Job& job);
 
 // The part's placement on the machine (post.setup): part frame -> work frame.
 [[nodiscard]] ToolPose to_work(const PostJob& post, const ToolPose& p);
+// Its inverse: work frame -> part frame (tip Rᵀ(p - t), axis Rᵀ axis).
+[[nodiscard]] ToolPose from_work(const PostJob& post, const ToolPose& p);
 // A mesh (the part, the design surface) placed on the machine the same way.
 [[nodiscard]] TriMesh to_work(const PostJob& post, TriMesh mesh);
 // Spindle nose to tip: post.tool_length, else holder + shank + cutter lengths.

@@ -503,6 +503,7 @@ Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const P
     up.linear.z() = p.safe_z;
     if (along_axis) up = on_axis_at_safe_z(current, s.tool_length_mm);
     add_move(true, along_axis ? unsigned(AxesLinear) : unsigned(AxisZ), up, programmed_pose(m, up, s.tool_length_mm), -1);
+    sec.cl = s.cl;
     sec.path = s.path;
     sec.end_block = int(p.blocks.size());
     out.sections.push_back(std::move(sec));

@@ -118,6 +118,10 @@ struct PostedSection {
   JointPath path;      // the solved, linearised motion (every pose, input and inserted)
   int first_block = 0, end_block = 0;  // this section's blocks in NcProgram::blocks
   int slowed_blocks = 0;  // blocks stretched by an axis speed or the inverse-time limit
+  // The section's CL-data as posted (the input's frame): with PostOptions::part its links as planned
+  // (lead-in and lead-out along the surface normal, planned again farther out when the
+  // back-simulation asked for it), else the input's moves.
+  ClProgram cl{};
 };
 struct Posted {
   NcProgram program;

@@ -14,6 +14,8 @@
 #include <regex>
 #include <sstream>
 
+#include "core/closest_point.h"
+#include "postproc/apt.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -261,4 +263,82 @@ TEST_CASE("flankcam verify: APT CL-data (part coordinates) is placed on the mach
   CHECK(double(apt["design_surface"]["coverage"]) > 0.5);
   // The CL-data and the program cut the same surface.
   CHECK(double(apt["design_surface"]["coverage"]) == doctest::Approx(double(ngc["design_surface"]["coverage"])).epsilon(0.05));
+}
+
+TEST_CASE("flankcam run: each NAME.apt carries its program's links, verify finds it clean with the job's clearance in its rapids" * doctest::test_suite("heavy")) {
+  // Before, the APT approached and left along the tool axis (a rapid to retract, a rapid to lead_in
+  // above the first pose): on the conical-tool blade those rapids slid the cone along the flank it
+  // touches, 0.04 and 0.06 mm into the blade for cone-2 and cone-3 and 0.003 mm off it for cone-1,
+  // while the programs of the same patches, whose links are planned against the part, were clean.
+  test::ScratchDir dir("verify-apt-links");
+  const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/conical-tool/job.yaml";
+  const std::string run = dir.file("run");
+  {
+    const Output r = run_program("run " + job + " --quiet --out " + run, dir);
+    INFO(r.err);
+    REQUIRE(r.code == 0);
+  }
+  const double clearance = 1, retract = 50;  // the job's clearance, the default retract (mm)
+  const std::vector<std::string> patches = {"cone-1", "cone-2", "cone-3"};
+  std::string files;
+  for (const std::string& name : patches) files += " " + run + "/" + name + ".apt " + run + "/" + name + ".ngc";
+  {
+    const Output r = run_program("verify --job " + job + files + " --out " + dir.file("v"), dir);
+    INFO(r.out, r.err);
+    CHECK(r.code == 0);
+  }
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("v/verify.json")));
+  REQUIRE(report["programs"].size() == 2 * patches.size());
+  for (const auto& p : report["programs"]) {
+    const std::string file = p["file"];
+    CAPTURE(file);
+    CHECK(p["clean"] == true);
+    CHECK(p["collisions_and_gouges"].empty());
+    for (const char* part : {"cutter", "shank", "holder"}) CHECK(double(p["min_clearance_rapid_mm"][part]) >= clearance - 0.1);
+    CHECK(double(p["design_surface"]["coverage"]) > 0.5);
+    if (file.find(".ngc") != std::string::npos) {  // the program on its APT, leads included
+      CHECK(int(p["cl_data"]["feed_blocks_compared"]) > 50);
+      CHECK(p["cl_data"]["off_cl_data"].empty());
+    }
+  }
+
+  // Each APT enters and leaves as its program does: down the tool axis from `retract` above the lead
+  // point, a feed in across the axis from off the surface onto the flank, the cut, a feed out across the
+  // axis, a rapid `retract` up the axis.
+  const SurfaceIndex blade(load_mesh(std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj").mesh);
+  for (const std::string& name : patches) {
+    CAPTURE(name);
+    const ClProgram cl = read_apt(run + "/" + name + ".apt");
+    const size_t n = cl.moves.size();
+    REQUIRE(n > 10);
+    REQUIRE(cl.profile.size() >= 2);
+    const double H = cl.profile.back().x();
+    const auto axial_by = [](const ToolPose& from, const ToolPose& to) {  // `to` along from's axis, or NaN
+      const Eigen::Vector3d d = to.tip - from.tip, a = from.axis.normalized();
+      return (d - d.dot(a) * a).norm() < 1e-5 && (to.axis - from.axis).norm() < 1e-8 ? d.dot(a) : NAN;
+    };
+    CHECK(cl.moves[0].rapid);
+    CHECK(cl.moves[1].rapid);
+    CHECK(axial_by(cl.moves[1].pose, cl.moves[0].pose) == doctest::Approx(retract).epsilon(1e-6));
+    CHECK(!cl.moves[2].rapid);
+    CHECK(cl.moves[n - 1].rapid);
+    CHECK(!cl.moves[n - 2].rapid);
+    CHECK(axial_by(cl.moves[n - 2].pose, cl.moves[n - 1].pose) == doctest::Approx(retract).epsilon(1e-6));
+    // The lead from the cut's end pose `on` to the lead point `off`: across the axis, at least the
+    // clearance long, away from the surface (the side of the axis the flank is not on).
+    const auto lead = [&](const ToolPose& on, const ToolPose& off, const std::string& which) {
+      CAPTURE(which);
+      const Eigen::Vector3d a = on.axis.normalized(), d = off.tip - on.tip, across = d - d.dot(a) * a;
+      const Eigen::Vector3d mid = on.tip + 0.5 * H * a;
+      Eigen::Vector3d out = mid - blade.closest(mid).point;  // from the flank to the axis
+      out = (out - out.dot(a) * a).normalized();
+      MESSAGE(name << " " << which << ": " << across.norm() << " mm across the axis, " << d.dot(a)
+                   << " mm along it, cos to the surface normal " << across.normalized().dot(out));
+      CHECK(across.norm() >= clearance);
+      CHECK(std::abs(d.dot(a)) <= across.norm() + 1e-9);  // lifted by at most a whole lead
+      CHECK(across.normalized().dot(out) > 0.5);
+    };
+    lead(cl.moves[2].pose, cl.moves[1].pose, "lead-in");
+    lead(cl.moves[n - 3].pose, cl.moves[n - 2].pose, "lead-out");
+  }
 }

@@ -5,6 +5,7 @@
 #include <sys/wait.h>
 
 #include <filesystem>
+#include <random>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
@@ -37,6 +38,23 @@ TEST_CASE("--threads reaches the OpenMP loops of the fit, and the previous count
   pipeline::RunOptions o;
   o.threads = 0;
   CHECK(o.validate() == "threads: 1 .. 256");
+}
+
+TEST_CASE("from_work undoes to_work for seeded random setups and poses") {
+  std::mt19937 rng;
+  std::uniform_real_distribution<double> deg(-180, 180), mm(-100, 100);
+  double worst_tip = 0, worst_axis = 0;
+  for (int k = 0; k < 200; ++k) {
+    pipeline::PostJob setup;
+    setup.setup_rotate_deg = {deg(rng), deg(rng), k % 10 == 0 ? 0.0 : deg(rng)};
+    setup.setup_translate_mm = {mm(rng), mm(rng), mm(rng)};
+    const ToolPose p{{mm(rng), mm(rng), mm(rng)}, Eigen::Vector3d(mm(rng), mm(rng), mm(rng)).normalized()};
+    const ToolPose back = pipeline::from_work(setup, pipeline::to_work(setup, p));
+    worst_tip = std::max(worst_tip, (back.tip - p.tip).norm());
+    worst_axis = std::max(worst_axis, (back.axis - p.axis).norm());
+  }
+  CHECK(worst_tip < 1e-10);
+  CHECK(worst_axis < 1e-12);
 }
 
 TEST_CASE("the shipped machines are found from the build tree") {

@@ -142,14 +142,23 @@ TEST_CASE("depth_cuts: 3 makes three sections of the patch's program, the tip 2/
   REQUIRE(run.fit.cl_data.at(0));
   REQUIRE(run.posted_cl.at(0));
   const ClProgram &final_cl = *run.fit.cl_data[0], &all = *run.posted_cl[0];
-  const size_t n = final_cl.moves.size();
-  REQUIRE(all.moves.size() == 3 * n);
+  // The cut of each level: the moves with a contact (the links, planned per section, have none).
+  const auto cut = [](const ClProgram& cl) {
+    std::vector<ToolPose> out;
+    for (const ClMove& mv : cl.moves)
+      if (mv.contact.allFinite()) out.push_back(mv.pose);
+    return out;
+  };
+  const std::vector<ToolPose> fitted = cut(final_cl), levels = cut(all);
+  const size_t n = fitted.size();
+  REQUIRE(n > 10);
+  REQUIRE(levels.size() == 3 * n);
   const double H = p.assembly.cutter_length();
   double worst_lift = 0, worst_off = 0;
   for (int level = 1; level <= 3; ++level) {
     double off_min = INFINITY, off_max = 0;
     for (size_t i = 0; i < n; ++i) {
-      const ToolPose &q = all.moves[size_t(level - 1) * n + i].pose, &f = final_cl.moves[i].pose;
+      const ToolPose &q = levels[size_t(level - 1) * n + i], &f = fitted[i];
       const Eigen::Vector3d e = f.axis.normalized(), d = q.tip - f.tip;
       CHECK((q.axis - f.axis).norm() < 1e-12);
       worst_lift = std::max(worst_lift, std::abs(d.dot(e) - H * (3 - level) / 3.0));
@@ -162,6 +171,18 @@ TEST_CASE("depth_cuts: 3 makes three sections of the patch's program, the tip 2/
   }
   CHECK(worst_lift < 1e-9);
   CHECK(worst_off < 1e-9);
+  // Each level has its own links, as its section of the program: down the tool axis from `retract`
+  // (50 mm, the default) above its lead point, fed in across the axis (at least the clearance, 1 mm).
+  int entries = 0;
+  for (size_t i = 0; i + 2 < all.moves.size(); ++i) {
+    if (!all.moves[i].rapid || !all.moves[i + 1].rapid || all.moves[i + 2].rapid) continue;
+    ++entries;
+    const Eigen::Vector3d e = all.moves[i + 1].pose.axis.normalized();
+    const Eigen::Vector3d down = all.moves[i + 1].pose.tip - all.moves[i].pose.tip, in = all.moves[i + 2].pose.tip - all.moves[i + 1].pose.tip;
+    CHECK((down + 50 * e).norm() < 1e-6);
+    CHECK((in - in.dot(e) * e).norm() >= 1);
+  }
+  CHECK(entries == 3);
   // One program, three sections in order, one tool change.
   int programs = 0;
   for (const pipeline::PostedProgram& w : run.programs) {
