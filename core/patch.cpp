@@ -197,6 +197,22 @@ ToolCut cut_tool(const Rails& r, const ToolRadius& tool, double lo, double hi) {
 }
 
 namespace {
+// The longest stretch of t (over 2 m rows) along which the tool keeps out of the part by the check
+// profile.
+std::pair<double, double> clear_run(const Rails& r, const ToolRadius& tool, const PatchOptions& o) {
+  const int rows = 2 * o.fit.samples_t;
+  const CheckProfile p = check_profile(r, tool, o.fit.check, rows, o.fit.samples_s);
+  std::vector<char> ok(static_cast<size_t>(rows));
+  for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(p.intrusion[size_t(i)] > 0);
+  return longest_run(ok);
+}
+// A cut of the tool (cut_tool) the fit may make: its radii within a tenth of the tolerance of the
+// tool's, still a tool (tool_defect), within the constraints.
+bool admissible_cut(const ToolCut& cut, const PatchOptions& o) {
+  return !(cut.radius_error > 0.1 * o.tolerance) && !tool_defect(cut.tool, cut.rails.length) &&
+         !(check_constraints(cut.tool, cut.rails.length, o.fit.constraints).violation > 0.01 * o.tolerance);
+}
+
 // The cutter ground shorter at its tip end (the end away from the holder, CheckSurface::up) until it
 // keeps out of the part: what stays of the tool sweeps the same surface, only the strip the cut-off
 // length made is lost. Cuts of 5%, 10%, ... 60% of the length are tried; the one whose longest clear
@@ -206,18 +222,13 @@ std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& 
   if (o.fit.fixed_tool) return std::nullopt;
   const Rails& r = plain.fit.rails;
   const bool tip_at_a = !o.fit.check.up || mean_axis(r).dot(*o.fit.check.up) >= 0;
-  const int rows = 2 * o.fit.samples_t;
   double best_score = 0;
   std::optional<ToolCut> best;
   for (int k = 1; k <= 12; ++k) {
     const double c = 0.05 * k;
     ToolCut cut = tip_at_a ? cut_tool(r, plain.fit.tool, c, 1) : cut_tool(r, plain.fit.tool, 0, 1 - c);
-    if (cut.radius_error > 0.1 * o.tolerance || tool_defect(cut.tool, cut.rails.length)) continue;
-    if (check_constraints(cut.tool, cut.rails.length, o.fit.constraints).violation > 0.01 * o.tolerance) continue;
-    const CheckProfile p = check_profile(cut.rails, cut.tool, o.fit.check, rows, o.fit.samples_s);
-    std::vector<char> ok(static_cast<size_t>(rows));
-    for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(p.intrusion[size_t(i)] > 0);
-    const auto [t0, t1] = longest_run(ok);
+    if (!admissible_cut(cut, o)) continue;
+    const auto [t0, t1] = clear_run(cut.rails, cut.tool, o);
     const double score = (t1 - t0) * (1 - c);
     if (score > best_score) best_score = score, best = std::move(cut);
     if (t0 == 0.0 && t1 == 1.0) break;  // clear everywhere: a longer cut only loses
@@ -245,22 +256,18 @@ std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& 
 // clearances are tried, within max_length; the shortest whose clear stretch is longest is kept
 // (untrimmed: machine_and_trim judges the longer cutter against Φ and the part). None when the tool
 // is a fixed one or no length helps.
-std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOptions& o, double clear_before) {
+std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOptions& o) {
   if (o.fit.fixed_tool || !(o.fit.check.clearance > 0)) return std::nullopt;
   const Rails& r = base.fit.rails;
   const bool tip_at_a = !o.fit.check.up || mean_axis(r).dot(*o.fit.check.up) >= 0;
-  const int rows = 2 * o.fit.samples_t;
-  double best_run = clear_before;
+  const auto [b0, b1] = clear_run(r, base.fit.tool, o);
+  double best_run = b1 - b0;
   std::optional<ToolCut> best;
   for (const double k : {1.0, 2.0, 4.0, 8.0}) {
     const double e = k * o.fit.check.clearance / r.length;
     ToolCut longer = tip_at_a ? cut_tool(r, base.fit.tool, 0, 1 + e) : cut_tool(r, base.fit.tool, -e, 1);
-    if (longer.radius_error > 0.1 * o.tolerance || tool_defect(longer.tool, longer.rails.length)) continue;
-    if (check_constraints(longer.tool, longer.rails.length, o.fit.constraints).violation > 0.01 * o.tolerance) continue;
-    const CheckProfile p = check_profile(longer.rails, longer.tool, o.fit.check, rows, o.fit.samples_s);
-    std::vector<char> ok(static_cast<size_t>(rows));
-    for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(p.intrusion[size_t(i)] > 0);
-    const auto [t0, t1] = longest_run(ok);
+    if (!admissible_cut(longer, o)) continue;
+    const auto [t0, t1] = clear_run(longer.rails, longer.tool, o);
     if (t1 - t0 > best_run + 1e-9) best_run = t1 - t0, best = std::move(longer);
     if (t0 == 0.0 && t1 == 1.0) break;  // clear everywhere: longer only risks more
   }
@@ -272,15 +279,6 @@ std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOp
   return f;
 }
 
-// The longest clear stretch (share of t) of a fit's motion by the check profile alone.
-double clear_stretch(const PatchFit& f, const PatchOptions& o) {
-  const int rows = 2 * o.fit.samples_t;
-  const CheckProfile p = check_profile(f.fit.rails, f.fit.tool, o.fit.check, rows, o.fit.samples_s);
-  std::vector<char> ok(static_cast<size_t>(rows));
-  for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(p.intrusion[size_t(i)] > 0);
-  const auto [t0, t1] = longest_run(ok);
-  return t1 - t0;
-}
 }  // namespace
 
 PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOptions& options) {
@@ -307,7 +305,7 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   }
   // Still trimmed for the shank or holder: the cutter made longer at its holder end.
   if (best.check_trim && best.check_trim->body)
-    if (std::optional<PatchFit> longer = lengthened_at_holder(base, o, clear_stretch(base, o))) {
+    if (std::optional<PatchFit> longer = lengthened_at_holder(base, o)) {
       if (o.on_stage) o.on_stage("cutter made longer at its holder end to keep the shank clear");
       PatchFit m = machine_and_trim(surface, std::move(*longer), o);
       if (machinable(m) && (!machinable(best) || m.coverage > best.coverage)) best = std::move(m);

@@ -53,17 +53,21 @@ std::string moved(std::vector<std::string> lines, size_t index, char axis, doubl
   return text;
 }
 
+// `flankcam run JOB --out DIR/run` (it must succeed); the run's folder.
+std::string run_job(const std::string& job, const test::ScratchDir& dir) {
+  const std::string run = dir.file("run");
+  const Output r = run_program("run " + job + " --quiet --out " + run, dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  return run;
+}
+
 }  // namespace
 
 TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm into the blade is refused naming its line" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("verify");
   const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/conical-tool/job.yaml";
-  const std::string run = dir.file("run");
-  {
-    const Output r = run_program("run " + job + " --quiet --out " + run, dir);
-    INFO(r.err);
-    REQUIRE(r.code == 0);
-  }
+  const std::string run = run_job(job, dir);
   const std::string program = (fs::path(run) / "cone-1.ngc").string();
 
   // The cutter verify reads beside the program (cone-1-tool.csv, also the APT profile and the DXF)
@@ -244,12 +248,7 @@ TEST_CASE("flankcam verify: APT CL-data (part coordinates) is placed on the mach
   job = job.substr(0, job.find("  - name: cone-2"));  // one patch
   const std::string job_file = dir.file("job.yaml");
   test::write_text(job_file, job);
-  const std::string run = dir.file("run");
-  {
-    const Output r = run_program("run " + job_file + " --quiet --out " + run, dir);
-    INFO(r.err);
-    REQUIRE(r.code == 0);
-  }
+  const std::string run = run_job(job_file, dir);
   const auto verify = [&](const std::string& program, const std::string& out) {
     const Output r = run_program("verify --job " + job_file + " " + program + " --out " + dir.file(out), dir);
     INFO(r.out, r.err);
@@ -272,12 +271,7 @@ TEST_CASE("flankcam run: each NAME.apt carries its program's links, verify finds
   // while the programs of the same patches, whose links are planned against the part, were clean.
   test::ScratchDir dir("verify-apt-links");
   const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/conical-tool/job.yaml";
-  const std::string run = dir.file("run");
-  {
-    const Output r = run_program("run " + job + " --quiet --out " + run, dir);
-    INFO(r.err);
-    REQUIRE(r.code == 0);
-  }
+  const std::string run = run_job(job, dir);
   const double clearance = 1, retract = 50;  // the job's clearance, the default retract (mm)
   const std::vector<std::string> patches = {"cone-1", "cone-2", "cone-3"};
   std::string files;
