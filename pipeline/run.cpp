@@ -260,13 +260,23 @@ SetupDecision choose_setup(const Job& job, const Machine& m, const std::vector<c
               std::find(rotations.begin(), rotations.end(), std::array<double, 3>{a, b, c}) == rotations.end())
             rotations.push_back({a, b, c});
   std::optional<SetupCandidate> best, farthest;
-  for (const auto& r : rotations) {
-    const SetupCandidate c = evaluate_setup(job, m, cl, tool_length_mm, r);
-    ++d.candidates;
-    if (r == std::array<double, 3>{0, 0, 0}) d.unrotated = c;
-    if (!c.reachable) continue;
-    if (!farthest || c.min_singular_deg > farthest->min_singular_deg + 1e-9) farthest = c;
-    if (!best && c.singular_stretches == 0 && c.min_singular_deg >= kClearDeg) best = c;
+  const auto evaluate = [&](const std::vector<std::array<double, 3>>& candidates) {
+    for (const auto& r : candidates) {
+      const SetupCandidate c = evaluate_setup(job, m, cl, tool_length_mm, r);
+      ++d.candidates;
+      if (r == std::array<double, 3>{0, 0, 0}) d.unrotated = c;
+      if (!c.reachable) continue;
+      if (!farthest || c.min_singular_deg > farthest->min_singular_deg + 1e-9) farthest = c;
+      if (!best && c.singular_stretches == 0 && c.min_singular_deg >= kClearDeg) best = c;
+    }
+  };
+  evaluate(rotations);
+  // None clear: the part turned over as well (180 deg about X, the same tilts and turns), for a part
+  // whose flanks open downwards (the HECC diffuser, hub on top: none of the above reaches it).
+  if (!best) {
+    std::vector<std::array<double, 3>> flipped;
+    for (const auto& r : rotations) flipped.push_back({r[0] > 0 ? r[0] - 180 : r[0] + 180, r[1], r[2]});
+    evaluate(flipped);
   }
   if (!best && !farthest)
     throw InputError(fmt::format("{}: post.setup: auto: no candidate rotation reaches every pose on {} (unrotated: {})",

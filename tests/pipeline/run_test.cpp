@@ -4,8 +4,11 @@
 #include <omp.h>
 #include <sys/wait.h>
 
+#include <array>
+#include <cstdio>
 #include <filesystem>
 #include <random>
+#include <sstream>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 
@@ -86,6 +89,54 @@ TEST_CASE("cmake --install: the installed flankcam runs the bundled example from
   const std::string machine = report["machine"]["file"];
   CHECK(machine == fs::weakly_canonical(prefix + "/share/flankcam/machines/xyzac-trt.yaml").string());
   CHECK(fs::exists(dir.file("elsewhere/out/cone-3.ngc")));
+}
+
+TEST_CASE("post.setup: auto turns a part over when its flank opens downwards (no upright setup reaches it)" * doctest::test_suite("heavy")) {
+  // The conical-tool blade and cone-1's lines turned 180 deg about X: the tools point down, xyzac-trt's
+  // A (-120..30 deg) cannot tilt the table that far (the HECC diffuser, hub on top, was refused with
+  // "no candidate rotation reaches every pose"). auto must turn the part over.
+  test::ScratchDir dir("setup-flip");
+  const auto lines_of = [](const std::string& text) {
+    std::vector<std::string> out;
+    std::istringstream in(text);
+    for (std::string l; std::getline(in, l);) out.push_back(l);
+    return out;
+  };
+  std::string obj;
+  for (const std::string& line : lines_of(test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj"))) {
+    if (line.rfind("v ", 0) != 0) {
+      obj += line + "\n";
+      continue;
+    }
+    double x, y, z;
+    REQUIRE(std::sscanf(line.c_str(), "v %lf %lf %lf", &x, &y, &z) == 3);
+    obj += fmt::format("v {} {} {}\n", x, -y, -z);
+  }
+  test::write_text(dir.file("blade.obj"), obj);
+  std::string job = "surface: blade.obj\n";
+  for (const std::string& line : lines_of(test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/examples/conical-tool/job.yaml"))) {
+    if (line.rfind("surface:", 0) == 0 || line.rfind("#", 0) == 0) continue;
+    if (line.find("name: cone-2") != std::string::npos) break;  // one patch
+    std::array<double, 6> v{};
+    if (std::sscanf(line.c_str(), " - [%lf, %lf, %lf, %lf, %lf, %lf]", &v[0], &v[1], &v[2], &v[3], &v[4], &v[5]) == 6) {
+      job += fmt::format("      - [{}, {}, {}, {}, {}, {}]\n", v[0], -v[1], -v[2], v[3], -v[4], -v[5]);
+      continue;
+    }
+    job += (line.rfind("post:", 0) == 0 ? std::string("post: {dialects: [linuxcnc], setup: auto}") : line) + "\n";
+  }
+  test::write_text(dir.file("job.yaml"), job);
+  const test::RunResult r = test::run_flankcam("run " + dir.file("job.yaml") + " --quiet --out " + dir.file("out"), dir);
+  INFO(job, r.err);
+  REQUIRE(r.code == 0);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const auto& setup = report["setup"];
+  REQUIRE(setup.is_object());
+  CHECK(setup["unrotated"]["reachable"] == false);
+  const double a = setup["chosen"]["rotate_deg"][0];
+  MESSAGE("chosen rotate ", setup["chosen"]["rotate_deg"].dump(), ", ", setup["reason"].get<std::string>());
+  CHECK(std::abs(a) >= 150);  // turned over (180, or 180 tilted by 15 or 30)
+  CHECK(int(setup["chosen"]["singular_stretches"]) == 0);
+  CHECK(fs::is_regular_file(dir.file("out/cone-1.ngc")));
 }
 
 TEST_CASE("post.setup: auto turns the conical-tool blade off the A = 0 singularity of xyzac-trt" * doctest::test_suite("heavy")) {
