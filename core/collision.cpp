@@ -8,6 +8,7 @@
 #include <tuple>
 
 #include "core/errors.h"
+#include "core/tool_end.h"
 
 namespace flankcam {
 
@@ -62,14 +63,7 @@ std::string CollisionOptions::validate() const {
 namespace {
 
 // The cutter's radius at z (linear between the given radii).
-double cutter_radius(const ToolAssembly& t, double z) {
-  const auto& c = t.cutter;
-  if (z <= c.front().x()) return c.front().y();
-  if (z >= c.back().x()) return c.back().y();
-  const auto it = std::upper_bound(c.begin(), c.end(), z, [](double v, const Eigen::Vector2d& p) { return v < p.x(); });
-  const Eigen::Vector2d &p = *(it - 1), &q = *it;
-  return p.y() + (q.y() - p.y()) * (z - p.x()) / (q.x() - p.x());
-}
+double cutter_radius(const ToolAssembly& t, double z) { return profile_radius(t.cutter, z); }
 
 // Shank and holder: radius at z (z >= cutter length) and which component it is.
 double body_radius(const ToolAssembly& t, double z, Component* which) {

@@ -53,14 +53,6 @@ Crossing crossing(const std::vector<Eigen::Vector2d>& side, double R) {
   return c;
 }
 
-double radius_at(const std::vector<Eigen::Vector2d>& p, double z) {
-  if (z <= p.front().x()) return p.front().y();
-  if (z >= p.back().x()) return p.back().y();
-  const auto it = std::upper_bound(p.begin(), p.end(), z, [](double v, const Eigen::Vector2d& q) { return v < q.x(); });
-  const Eigen::Vector2d &a = *(it - 1), &b = *it;
-  return a.y() + (b.y() - a.y()) * (z - a.x()) / (b.x() - a.x());
-}
-
 void check_side(const std::vector<Eigen::Vector2d>& side) {
   if (side.size() < 2) throw InputError("tool end: the tool's meridian needs at least two points");
   for (size_t k = 1; k < side.size(); ++k)
@@ -130,6 +122,14 @@ EndProfile end_profile(const std::vector<Eigen::Vector2d>& side, const ToolEnd& 
   return out;
 }
 
+double profile_radius(const std::vector<Eigen::Vector2d>& p, double z) {
+  if (z <= p.front().x()) return p.front().y();
+  if (z >= p.back().x()) return p.back().y();
+  const auto it = std::upper_bound(p.begin(), p.end(), z, [](double v, const Eigen::Vector2d& q) { return v < q.x(); });
+  const Eigen::Vector2d &a = *(it - 1), &b = *it;
+  return a.y() + (b.y() - a.y()) * (z - a.x()) / (b.x() - a.x());
+}
+
 EndDistance end_distance(const EndProfile& e, double z, double rho) {
   const std::vector<Eigen::Vector2d>& p = e.profile;
   const double z0 = e.tip_z;
@@ -161,14 +161,14 @@ EndDistance end_distance(const EndProfile& e, double z, double rho) {
     top = d_arc < d_face && arc_top;
   }
   EndDistance out;
-  const bool inside = z > z0 && z < p.back().x() && rho < radius_at(p, z);
+  const bool inside = z > z0 && z < p.back().x() && rho < profile_radius(p, z);
   if (!inside) {
     out.distance = d;
     out.reached = !top;
     return out;
   }
   // Inside: as deep as the shorter way out, through the end or radially through the side.
-  const double radial = radius_at(p, z) - rho;
+  const double radial = profile_radius(p, z) - rho;
   out.distance = -std::min(d, radial);
   out.reached = d <= radial && !top;
   return out;

@@ -44,6 +44,10 @@ struct EndProfile {
 // largest that fits: rc would be negative), or the tool is too short for it.
 [[nodiscard]] EndProfile end_profile(const std::vector<Eigen::Vector2d>& side, const ToolEnd& end, int arc_points = 16);
 
+// The profile's radius at z (z, r points with z increasing): linear between its points, its end
+// radii beyond them.
+[[nodiscard]] double profile_radius(const std::vector<Eigen::Vector2d>& profile, double z);
+
 // The radius of the ball end of this side meridian (the corner radius with rc = 0).
 [[nodiscard]] double ball_radius(const std::vector<Eigen::Vector2d>& side);
 

@@ -3,12 +3,12 @@
 #include <Eigen/Geometry>
 #include <fmt/format.h>
 
-#include <algorithm>
 #include <cmath>
 
 #include "core/atomic_file.h"
 #include "core/errors.h"
 #include "core/number_format.h"
+#include "core/tool_end.h"
 
 namespace flankcam {
 
@@ -25,14 +25,8 @@ ToolDimensions tool_dimensions(const std::vector<Eigen::Vector2d>& p, int end_po
   // The taper over the side's middle half: a tool that is the union of its spheres rounds off at its
   // ends (within d sin(half angle) of them), so its end diameters understate a cone's angle.
   const double z0 = p[size_t(end_points)].x(), z1 = p.back().x();
-  const auto radius_at = [&](double z) {
-    size_t k = size_t(end_points) + 1;
-    while (k + 1 < p.size() && p[k].x() < z) ++k;
-    const Eigen::Vector2d &a = p[k - 1], &b = p[k];
-    return b.x() > a.x() ? a.y() + (b.y() - a.y()) * std::clamp((z - a.x()) / (b.x() - a.x()), 0.0, 1.0) : b.y();
-  };
   const double za = z0 + 0.25 * (z1 - z0), zb = z0 + 0.75 * (z1 - z0);
-  d.cone_half_angle_deg = std::atan2(radius_at(zb) - radius_at(za), zb - za) * 180 / M_PI + 0.0;
+  d.cone_half_angle_deg = std::atan2(profile_radius(p, zb) - profile_radius(p, za), zb - za) * 180 / M_PI + 0.0;
   return d;
 }
 
