@@ -197,6 +197,9 @@ ToolCut cut_tool(const Rails& r, const ToolRadius& tool, double lo, double hi) {
 }
 
 namespace {
+// Whether the tool's tip is the rails' a end: its holder end (CheckSurface::up, else b) is b.
+bool tip_is_a(const Rails& r, const CheckSurface& c) { return !c.up || mean_axis(r).dot(*c.up) >= 0; }
+
 // The longest stretch of t (over 2 m rows) along which the tool keeps out of the part by the check
 // profile.
 std::pair<double, double> clear_run(const Rails& r, const ToolRadius& tool, const PatchOptions& o) {
@@ -221,7 +224,7 @@ bool admissible_cut(const ToolCut& cut, const PatchOptions& o) {
 std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& plain, const PatchOptions& o) {
   if (o.fit.fixed_tool) return std::nullopt;
   const Rails& r = plain.fit.rails;
-  const bool tip_at_a = !o.fit.check.up || mean_axis(r).dot(*o.fit.check.up) >= 0;
+  const bool tip_at_a = tip_is_a(r, o.fit.check);
   double best_score = 0;
   std::optional<ToolCut> best;
   for (int k = 1; k <= 12; ++k) {
@@ -259,7 +262,7 @@ std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& 
 std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOptions& o) {
   if (o.fit.fixed_tool || !(o.fit.check.clearance > 0)) return std::nullopt;
   const Rails& r = base.fit.rails;
-  const bool tip_at_a = !o.fit.check.up || mean_axis(r).dot(*o.fit.check.up) >= 0;
+  const bool tip_at_a = tip_is_a(r, o.fit.check);
   const auto [b0, b1] = clear_run(r, base.fit.tool, o);
   double best_run = b1 - b0;
   std::optional<ToolCut> best;

@@ -64,21 +64,22 @@ std::vector<Eigen::Vector2d> body_samples(const HolderJob& h, const Similarity& 
   return out;
 }
 
-// The tool's meridian (z, r) in mm from the tip.
+// (z, r) points of the unit frame in mm.
+std::vector<Eigen::Vector2d> profile_mm(const Similarity& fr, std::vector<Eigen::Vector2d> zr) {
+  for (Eigen::Vector2d& p : zr) p *= fr.length_to_mm(1.0);
+  return zr;
+}
+
 // The tool as ground, mm: the union of its spheres d(s) between its end planes (cutter_union), the
 // one cutter of the fit's trim, the collision check, the back-simulation, the tool files and the
 // CL-data's profile (so `verify`, reading that profile, judges the cutter the run judged).
 std::vector<Eigen::Vector2d> tool_profile_mm(const Similarity& fr, const FitResult& r) {
-  std::vector<Eigen::Vector2d> profile;
-  for (const Eigen::Vector2d& zr : cutter_union(r.tool, r.rails.length)) profile.push_back(fr.length_to_mm(1.0) * zr);
-  return profile;
+  return profile_mm(fr, cutter_union(r.tool, r.rails.length));
 }
 
 // The side meridian (the envelope of the circles d(z), meridian()) a rounded end is cut into.
 std::vector<Eigen::Vector2d> side_meridian_mm(const Similarity& fr, const FitResult& r) {
-  std::vector<Eigen::Vector2d> profile;
-  for (const Eigen::Vector2d& zr : meridian(r.tool, r.rails.length)) profile.push_back(fr.length_to_mm(1.0) * zr);
-  return profile;
+  return profile_mm(fr, meridian(r.tool, r.rails.length));
 }
 
 nlohmann::ordered_json vec_mm(const Eigen::Vector3d& v) { return {round_mm(v.x()), round_mm(v.y()), round_mm(v.z())}; }

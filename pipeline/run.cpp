@@ -202,6 +202,11 @@ ToolPose from_work(const PostJob& post, const ToolPose& p) {
   return {Rt * (p.tip - t), (Rt * p.axis).normalized()};
 }
 
+ClProgram to_work(const PostJob& post, ClProgram cl) {
+  for (ClMove& mv : cl.moves) mv.pose = to_work(post, mv.pose);
+  return cl;
+}
+
 TriMesh to_work(const PostJob& post, TriMesh mesh) {
   for (Eigen::Vector3d& v : mesh.vertices) v = to_work(post, {v, Eigen::Vector3d::UnitZ()}).tip;
   return mesh;
@@ -334,10 +339,7 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
       for (int level = 1; level <= j.depth_cuts; ++level)
         sections.push_back(j.depth_cuts == 1 ? pass : depth_level(pass, p, level, j.depth_cuts, *design));
     r.posted_cl[k] = all_passes(sections);  // replaced by the programs' planned links below
-    for (ClProgram& work : sections) {
-      for (ClMove& mv : work.moves) mv.pose = to_work(j.post, mv.pose);
-      inputs.push_back({std::move(work), p.job->name, r.tool_length_mm.back(), assembly});
-    }
+    for (ClProgram& section : sections) inputs.push_back({to_work(j.post, std::move(section)), p.job->name, r.tool_length_mm.back(), assembly});
   }
   if (inputs.empty()) return r;
   // The part placed on the machine (work frame): the links are planned against it, and every

@@ -104,6 +104,8 @@ void check_fit_outputs(const Job& job);
 [[nodiscard]] ToolPose to_work(const PostJob& post, const ToolPose& p);
 // Its inverse: work frame -> part frame (tip Rᵀ(p - t), axis Rᵀ axis).
 [[nodiscard]] ToolPose from_work(const PostJob& post, const ToolPose& p);
+// CL-data placed on the machine the same way (every move's pose).
+[[nodiscard]] ClProgram to_work(const PostJob& post, ClProgram cl);
 // A mesh (the part, the design surface) placed on the machine the same way.
 [[nodiscard]] TriMesh to_work(const PostJob& post, TriMesh mesh);
 // Spindle nose to tip: post.tool_length, else holder + shank + cutter lengths.

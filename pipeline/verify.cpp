@@ -181,8 +181,7 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
     r.file = file;
     if (is_cl_data_file(file)) {
       // CL-data is in part coordinates: placed on the machine like the part (post.setup).
-      ClProgram cl = parse_apt(text, file);
-      for (ClMove& mv : cl.moves) mv.pose = to_work(j.post, mv.pose);
+      const ClProgram cl = to_work(j.post, parse_apt(text, file));
       VerifyTool vt;
       if (given.empty() && cl.profile.size() >= 2) {
         vt.assembly = assembly_from_meridian(cl.profile, holder);
@@ -203,8 +202,7 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
       // The CL-data the program was posted from (part coordinates, placed like the part).
       std::vector<ClReference> cl;
       const auto load_cl = [&](const std::string& apt, int tool) {
-        ClReference ref{tool, read_apt(apt), apt};
-        for (ClMove& mv : ref.cl.moves) mv.pose = to_work(j.post, mv.pose);
+        ClReference ref{tool, to_work(j.post, read_apt(apt)), apt};
         r.cl_files.push_back(apt);
         cl.push_back(std::move(ref));
       };
