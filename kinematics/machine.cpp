@@ -10,6 +10,7 @@
 #include <tuple>
 
 #include "core/errors.h"
+#include "core/file_probe.h"
 #include "core/yaml_fields.h"
 
 namespace flankcam {
@@ -64,7 +65,7 @@ void validate(const Machine& m) {
 }
 
 Machine load_machine(const std::string& path) {
-  if (!std::filesystem::is_regular_file(path)) throw MachineError(path + ": machine file not found");
+  if (!is_file(path)) throw MachineError(path + ": machine file not found");
   const Fields f(path);
   const YAML::Node root = f.load();
   if (!root.IsMap()) throw MachineError(path + ": expected a mapping (name:, linear:, rotary:, ...)");

@@ -12,6 +12,7 @@
 #include "core/check_surface.h"
 #include "core/detect.h"
 #include "core/errors.h"
+#include "core/file_probe.h"
 #include "core/number_format.h"
 #include "postproc/apt.h"
 #include "postproc/report_svg.h"
@@ -877,7 +878,7 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
   if (!job.machine.empty()) {
     const std::filesystem::path local = job.file.parent_path() / job.machine;
     y += "machine: " +
-         quoted(std::filesystem::is_regular_file(local) ? std::filesystem::absolute(local).lexically_normal().string()
+         quoted(is_file(local) ? std::filesystem::absolute(local).lexically_normal().string()
                                                         : job.machine) +
          "\n";
   }

@@ -9,6 +9,7 @@
 #include <set>
 
 #include "core/errors.h"
+#include "core/file_probe.h"
 #include "cad/cad_reader.h"
 #include "core/yaml_fields.h"
 #include "pipeline/data_dir.h"
@@ -223,7 +224,7 @@ FileKey read_file_key(const Reader& r, const YAML::Node& n, const std::string& k
   }
   const std::filesystem::path p = r.text(file, file_key);
   out.path = p.is_absolute() ? p : base / p;
-  if (!std::filesystem::is_regular_file(out.path)) r.fail(file, file_key, "file not found: " + out.path.string());
+  if (!is_file(out.path)) r.fail(file, file_key, "file not found: " + escaped(out.path.string(), 200));
   const bool cad = is_cad_file(out.path.string());
   if (!out.faces.empty() && !cad) r.fail(n["faces"], key + ".faces", "only STEP/IGES models have faces");
   if (out.deflection_mm && !cad) r.fail(n["deflection"], key + ".deflection", "only STEP/IGES models are tessellated by flankcam");
@@ -247,7 +248,7 @@ Eigen::Matrix3d setup_rotation(const PostJob& post) {
 
 Job read_job(const std::filesystem::path& file) {
   const std::string name = file.string();
-  if (!std::filesystem::is_regular_file(file)) throw InputError(name + ": job file not found");
+  if (!is_file(file)) throw InputError(escaped(name, 200) + ": job file not found");
   const Reader r(name);
   const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");

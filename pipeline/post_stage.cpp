@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "core/errors.h"
+#include "core/file_probe.h"
 #include "pipeline/data_dir.h"
 #include "postproc/gcode.h"
 #include "postproc/verify.h"
@@ -21,10 +22,10 @@ Machine find_machine(const std::string& name_or_path, const std::filesystem::pat
     return m;
   };
   for (const fs::path& p : {given, relative_to / given})
-    if (!p.empty() && fs::is_regular_file(p)) return load(p);
+    if (!p.empty() && is_file(p)) return load(p);
   const fs::path dir = machines_dir();
   const fs::path shipped = dir / (name_or_path + ".yaml");
-  if (fs::is_regular_file(shipped)) return load(shipped);
+  if (is_file(shipped)) return load(shipped);
   std::vector<std::string> names;
   for (const auto& e : fs::directory_iterator(dir))
     if (e.path().extension() == ".yaml") names.push_back(e.path().stem().string());

@@ -15,6 +15,7 @@
 #include "core/atomic_file.h"
 #include "core/check_surface.h"
 #include "core/errors.h"
+#include "core/file_probe.h"
 #include "core/mesh.h"
 #include "core/number_format.h"
 #include "pipeline/post_stage.h"
@@ -166,7 +167,7 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
       else if (given.count(0)) meridian = given[0];
       else {
         const fs::path csv = path.parent_path() / (name + "-tool.csv");
-        if (!fs::is_regular_file(csv))
+        if (!is_file(csv))
           throw InputError(fmt::format("{}: tool T{}: no {} beside the program (give --tool {}=FILE)", file, number,
                                        csv.filename().string(), number));
         meridian = read_meridian(csv.string());
@@ -216,7 +217,7 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
         const std::map<int, std::string> named = names.empty() ? std::map<int, std::string>{{0, path.stem().string()}} : names;
         for (const auto& [number, name] : named) {
           const fs::path apt = path.parent_path() / (name + ".apt");
-          if (fs::is_regular_file(apt)) load_cl(apt.string(), number);
+          if (is_file(apt)) load_cl(apt.string(), number);
           else missing.push_back(apt.filename().string());
         }
         if (!missing.empty())

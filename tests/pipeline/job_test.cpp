@@ -59,6 +59,30 @@ TEST_CASE("read_job bounds every value and names the file, line and key with the
   CHECK(error_of(dir, "feed: 600") == "(accepted)");
 }
 
+TEST_CASE("read_job: a file name the system refuses (too long, control characters) is 'file not found' on its key") {
+  // std::filesystem's throwing overloads aborted the program on such names (found by .ci/fuzz).
+  test::ScratchDir dir("job-names");
+  test::write_text(dir.file("s.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  const std::string long_name(5000, 'a');
+  const struct {
+    std::string yaml;
+    const char* message;
+  } cases[] = {
+      {"surface: " + long_name + ".obj\n", "job.yaml:1: surface: file not found: "},
+      {"surface: s.obj\npart: {file: " + long_name + "}\n", "job.yaml:2: part.file: file not found: "},
+      {"surface: \"s\\x01\\n.obj\"\n", "job.yaml:1: surface: file not found: "},
+  };
+  for (const auto& c : cases) {
+    test::write_text(dir.file("job.yaml"), c.yaml + patch);
+    const std::string message = test::job_error(dir.file("job.yaml"));
+    CAPTURE(message);
+    CHECK(message.find(c.message) != std::string::npos);
+    CHECK(message.find('\n') == std::string::npos);
+    CHECK(message.size() < 400);  // the name is quoted, not copied whole
+  }
+  CHECK(test::job_error(dir.file(long_name + ".yaml")).find(": job file not found") != std::string::npos);
+}
+
 TEST_CASE("rail and meridian control points: errors name the job's key and line, not FitOptions fields") {
   test::ScratchDir dir("job-control-points");
   const struct {
