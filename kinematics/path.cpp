@@ -219,7 +219,25 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     }
   }
 
-  // Viterbi over candidates: cost = rotary travel in minutes at the axes' maximum speeds.
+  // Viterbi over candidates: cost = rotary travel in minutes at the axes' maximum speeds. A change of
+  // IK branch between two poses whose joint interpolation leaves the intended axis by more than the
+  // angle tolerance (A through 0 while the motion passes the vertical farther off than that: no
+  // splitting of the block brings it back) costs kBadFlip minutes: the path stays on its branch and
+  // turns C instead, unless nothing else reaches.
+  const PreparedForward fk = prepare_forward(m, o.tool_length_mm);
+  const double cos_flip = std::cos(o.angle_tolerance_deg * kRadPerDeg);
+  constexpr double kBadFlip = 1e6;
+  const auto flip_leaves_axis = [&](int i, const std::array<double, 2>& from, const std::array<double, 2>& to) {
+    const BlockSlerp slerp(poses[size_t(i - 1)], poses[size_t(i)]);
+    for (const double f : {0.25, 0.5, 0.75}) {
+      std::array<double, 2> deg{};
+      for (size_t k = 0; k < 2; ++k) deg[k] = (1 - f) * from[k] + f * to[k];
+      const Trig tr = trig_of(deg);
+      const Eigen::Vector3d want = motion ? motion((1 - f) * t[size_t(i - 1)] + f * t[size_t(i)]).axis : slerp.at(f).axis;
+      if (forward(fk, Eigen::Vector3d::Zero(), tr.c, tr.s).axis.dot(want.normalized()) < cos_flip) return true;
+    }
+    return false;
+  };
   struct State {
     double cost = kInf;
     std::array<double, 2> deg{0, 0};
@@ -269,6 +287,9 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
             continue;
           }
         }
+        if (i > 0 && p != c && cand[i].size() > 1 && cand[i - 1].size() > 1 && cost < st[i][c].cost &&
+            flip_leaves_axis(i, prev, deg))
+          cost += kBadFlip;
         if (cost < st[i][c].cost) st[i][c] = {cost, deg, int(p)};
       }
     }
@@ -358,25 +379,60 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   out.branch_changes = branch_changes;
 
   // Linearisation by recursive bisection of each block.
-  const PreparedForward fk = prepare_forward(m, o.tool_length_mm);
   // The checks sample each block at a few points; the error between them peaks a few percent higher
   // (measured up to 4%), so the blocks are held to 90% of the tolerance.
   const double tip_tol2 = std::pow(0.9 * o.tolerance_mm, 2), cos_tol = std::cos(0.9 * o.angle_tolerance_deg * kRadPerDeg);
-  // Nearest solution of an inserted pose to the joints before it (same unwinding).
-  const auto nearest = [&](const ToolPose& p, const Joints& near) -> std::optional<Joints> {
+  const double cos_node = std::cos(0.8 * o.angle_tolerance_deg * kRadPerDeg), cos_zone = std::cos(20 * o.angle_tolerance_deg * kRadPerDeg);
+  // The solution of a pose inserted a fraction f of the way from joints `a` to `b` (unwound like `a`)
+  // with the least rotary travel from a to it and on to b. Nearest to `a` alone is not enough: just
+  // past a near-singular pose the branch nearest `a` can be the mirror of b's, and the sub-block
+  // left between them turns C by 180 deg while A changes sign, the same axis at both ends (the
+  // table swings the part under the tool).
+  const auto between = [&](const ToolPose& p, const Joints& a, const Joints& b, double f) -> std::optional<Joints> {
+    // Near the singular direction the exact solutions' free-ish angle swings fast (C turns 180 deg
+    // while the axis passes the vertical) and means little: each solution is moved toward the angles
+    // interpolated from a to b as far as its axis stays within 0.8 of the angle tolerance, so a motion
+    // passing the vertical closer than that crosses A = 0 without C turning, and C joins its exact
+    // values smoothly beyond.
+    const bool near_singular_axis = singularity_cosine(m, p.axis) > cos_zone;
+    const auto axis_of = [&](const std::array<double, 2>& deg) {
+      const Trig tr = trig_of(deg);
+      return forward(fk, Eigen::Vector3d::Zero(), tr.c, tr.s).axis;
+    };
     std::optional<Joints> best;
     double best_d = kInf;
     for (const RotarySolution& s : rotary_solution_pair(m, p.axis)) {
       Joints j;
-      double d = 0;
       bool ok = true;
+      std::array<double, 2> towards{};
       for (int k = 0; k < 2; ++k) {
-        const double v = s.free[k] ? near.rotary[k] : resolve(m.rotary[k], s.deg[k], near.rotary[k]);
+        towards[size_t(k)] = (1 - f) * a.rotary[k] + f * b.rotary[k];
+        const double v = s.free[k] ? towards[size_t(k)] : resolve(m.rotary[k], s.deg[k], a.rotary[k]);
         if (std::isnan(v)) ok = false;
         j.rotary[k] = v;
-        d += std::abs(v - near.rotary[k]);
       }
-      if (!ok || d >= best_d) continue;
+      if (!ok) continue;
+      if (near_singular_axis) {
+        const std::array<double, 2> exact = j.rotary;
+        const auto moved = [&](double lambda) {
+          std::array<double, 2> d{};
+          for (size_t k = 0; k < 2; ++k) d[k] = exact[k] + lambda * (towards[k] - exact[k]);
+          return d;
+        };
+        double lo = 0, hi = 1;
+        if (axis_of(moved(1)).dot(p.axis) >= cos_node) lo = 1;
+        else
+          for (int it = 0; it < 24; ++it) {
+            const double mid = 0.5 * (lo + hi);
+            (axis_of(moved(mid)).dot(p.axis) >= cos_node ? lo : hi) = mid;
+          }
+        j.rotary = moved(lo);
+      }
+      double d = 0;
+      for (int k = 0; k < 2; ++k)
+        d += near_singular_axis ? std::abs(j.rotary[k] - towards[size_t(k)])
+                                : std::abs(j.rotary[k] - a.rotary[k]) + std::abs(b.rotary[k] - j.rotary[k]);
+      if (d >= best_d) continue;
       j.linear = linear_joints(m, p, j.rotary, o.tool_length_mm);
       if (linear_limits(m, j.linear).axis >= 0) continue;
       best_d = d;
@@ -434,7 +490,7 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     }
     const double tm = 0.5 * (a.t + b.t);
     const ToolPose pm = intended_at(blk, tm, true);
-    const std::optional<Joints> qm = nearest(pm, a.q);
+    const std::optional<Joints> qm = between(pm, a.q, b.q, 0.5);
     if (!qm) {
       ++blk.unresolved;
       return;
