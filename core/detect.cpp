@@ -786,6 +786,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         f.fit = std::move(joint[k]);
         f.tip_shortened = 0;
         f.holder_lengthened = 0;
+        f.tip_lifted = 0;
         f = po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
         if (!machinable(f)) break;
         refit.push_back(std::move(f));

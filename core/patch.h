@@ -70,6 +70,7 @@ struct PatchFit {
   bool check_refused = false;
   double tip_shortened = 0;  // length ground off the cutter's tip end to keep it out of the part (unit frame)
   double holder_lengthened = 0;  // length added to the cutter at its holder end to keep the shank clear (unit frame)
+  double tip_lifted = 0;  // the most a cylinder was slid up its axis at one pose to keep its end out of the part (unit frame)
   std::optional<ExploredLine> explored;     // line-driven only
   std::optional<LineTrajectory> trajectory;  // line-driven only
 };
