@@ -284,16 +284,34 @@ std::optional<PatchFit> lifted_at_tip(const SurfaceIndex& surface, const PatchFi
     for (int j = std::max(0, i - 2); j <= std::min(rows - 1, i + 2); ++j) most = std::max(most, need[size_t(j)] < 0 ? steps : need[size_t(j)]);
     lift[size_t(i)] = 0.05 * most;
   }
+  // The lift as a cubic spline on the rails' knots that nowhere falls below what a row needs (a
+  // least-squares fit of the steps would dip under them beside each step): the rows' targets are
+  // raised by their deficit until it is gone.
   const std::vector<double> ts = uniform_parameters(rows);
+  Eigen::MatrixXd target(rows, 1);
+  for (int i = 0; i < rows; ++i) target(i, 0) = lift[size_t(i)];
+  BSpline smooth;
+  for (int round = 0; round < 20; ++round) {
+    smooth = fit_bspline(target, ts, r.a.size());
+    double worst = 0;
+    for (int i = 0; i < rows; ++i) {
+      const double deficit = lift[size_t(i)] - smooth.value(ts[size_t(i)]);
+      if (deficit > 0) target(i, 0) += 1.5 * deficit, worst = std::max(worst, deficit);
+    }
+    if (!(worst > 1e-4)) break;
+  }
   Eigen::MatrixXd A(rows, 3), B(rows, 3);
+  double most = 0;
   for (int i = 0; i < rows; ++i) {
-    const double lo = tip_at_a ? lift[size_t(i)] : -lift[size_t(i)];
+    const double up = std::max(0.0, smooth.value(ts[size_t(i)]));
+    most = std::max(most, up);
+    const double lo = tip_at_a ? up : -up;
     A.row(i) = r.point(ts[size_t(i)], lo).transpose();
     B.row(i) = r.point(ts[size_t(i)], lo + 1).transpose();
   }
   PatchFit f = plain;
   f.fit.rails = {fit_bspline(A, ts, r.a.size()), fit_bspline(B, ts, r.b.size()), r.length};
-  f.tip_lifted = *std::max_element(lift.begin(), lift.end()) * r.length;
+  f.tip_lifted = most * r.length;
   try {
     f.fit.eps_opt = sample_error(surface, f.fit.rails, f.fit.tool, o.fit);
   } catch (const InputError&) {
