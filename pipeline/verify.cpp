@@ -303,7 +303,9 @@ void write_verify(const VerifyRun& run, OutputDir& out) {
     e["cycle_minutes"] = r4(v.cycle_minutes);
     e["cut_minutes"] = r4(v.cut_minutes);
     e["design_surface"] = {{"vertices_reached", v.design.reached}, {"within_tolerance", v.design.within},
-                           {"coverage", r4(v.design.coverage())}};
+                           {"coverage", r4(v.design.coverage())},
+                           {"share_of_all_vertices",
+                            r4(v.design.deviation_mm.empty() ? 0.0 : double(v.design.within) / double(v.design.deviation_mm.size()))}};
     e["blocks"] = {{"columns", {"line", "motion", "cutter_mm", "shank_mm", "holder_mm"}}, {"rows", blocks}};
     programs.push_back(e);
 

@@ -137,6 +137,14 @@ TEST_CASE("depth_cuts: 3: the program, NAME.apt and NAME-cl.csv hold every level
   MESSAGE("verify: " << cl["feed_blocks_compared"] << " feed blocks compared with the CL-data of 3 levels (" << moves
                      << " moves a level)");
   CHECK(int(cl["feed_blocks_compared"]) > 3 * moves * 9 / 10);  // every level compared
+  // The design surface's share: of the vertices the program reaches, and of all of them (the
+  // message said "of the design surface" for the first).
+  const nlohmann::json& ds = report["programs"][0]["design_surface"];
+  const std::string obj = test::read_text(std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj");
+  const int vertices = count(obj, "\nv ") + (obj.rfind("v ", 0) == 0 ? 1 : 0);
+  CHECK(double(ds["coverage"]) == doctest::Approx(double(ds["within_tolerance"]) / double(ds["vertices_reached"])).epsilon(1e-3));
+  CHECK(double(ds["share_of_all_vertices"]) == doctest::Approx(double(ds["within_tolerance"]) / vertices).epsilon(1e-3));
+  CHECK(double(ds["share_of_all_vertices"]) <= double(ds["coverage"]));
 
   // Bad values: exit 2, the key and line named, nothing written.
   std::string bad_end = job;
