@@ -574,6 +574,17 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     out.coverage = coverage(m, out.deviation, tol);
     for (size_t v = 0; v < nv; ++v) covered[v] = std::isfinite(out.deviation[v]) && std::abs(out.deviation[v]) <= tol;
   };
+  // What each patch brings first, in the order they were found (after patches were replaced).
+  const auto recount_gains = [&]() {
+    std::fill(covered.begin(), covered.end(), 0);
+    for (size_t k = 0; k < fits.size(); ++k) {
+      gains[k] = gain_of(fits[k], covered, area, tol);
+      for (size_t v = 0; v < nv; ++v) {
+        const double d = fits[k].machined.design_deviation[v];
+        covered[v] |= std::isfinite(d) && std::abs(d) <= tol;
+      }
+    }
+  };
   update_union();
   out.stop = CoverStop::NoProgress;
   out.shared_tool = o.shared_tool || o.patch.fit.fixed_tool.has_value();
@@ -766,6 +777,28 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       pool.clear();
     }
   }
+  // Cylinders ground shorter at their tip: slid up their axis instead where that covers more of the
+  // surface with the other patches as they are (lifted_instead_of_ground).
+  if (o.patch.fit.check.part)
+    for (size_t k = 0; k < fits.size(); ++k) {
+      if (fits[k].fit.tool.shape != ToolShape::Cylinder || !(fits[k].tip_shortened > 0)) continue;
+      report("sliding patch " + std::to_string(k + 1) + "'s cylinder up its axis instead of grinding it shorter");
+      PatchOptions po = o.patch;
+      po.trim_gouges = true;
+      std::optional<PatchFit> lifted = lifted_instead_of_ground(surface, fits[k], po);
+      if (!lifted) continue;
+      std::vector<const MachinedSurface*> others;
+      for (size_t j = 0; j < fits.size(); ++j)
+        if (j != k) others.push_back(&fits[j].machined);
+      const UnionDeviation u = union_deviation(others, nv);
+      std::vector<char> by_others(nv);
+      for (size_t v = 0; v < nv; ++v) by_others[v] = std::isfinite(u.deviation[v]) && std::abs(u.deviation[v]) <= tol;
+      if (gain_of(*lifted, by_others, area, tol) > gain_of(fits[k], by_others, area, tol) + 1e-4) {
+        fits[k] = std::move(*lifted);
+        update_union();
+        recount_gains();
+      }
+    }
   out.coverage_held_tool = out.coverage;
   if (sharing && fits.size() > 1) {
     // One joint refit of every patch with one tool (eq. 12 summed over the patches, the radii free
@@ -802,15 +835,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         fits = std::move(refit);
         update_union();
         out.joint_refit = true;
-        // What each patch brings first, in the order they were found.
-        std::fill(covered.begin(), covered.end(), 0);
-        for (size_t k = 0; k < fits.size(); ++k) {
-          gains[k] = gain_of(fits[k], covered, area, tol);
-          for (size_t v = 0; v < nv; ++v) {
-            const double d = fits[k].machined.design_deviation[v];
-            covered[v] |= std::isfinite(d) && std::abs(d) <= tol;
-          }
-        }
+        recount_gains();
       }
     }
     report(out.joint_refit ? "joint refit kept" : "joint refit not kept (the held tool covers more)");

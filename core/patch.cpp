@@ -374,12 +374,6 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
     PatchFit m = machine_and_trim(surface, *cut, o);
     if (machinable(m) && (!machinable(best) || m.coverage > best.coverage)) best = std::move(m), base = std::move(*cut), shortened = true;
   }
-  // A cylinder slid up its axis only where the part needs it (compared like the shortened tool).
-  if (std::optional<PatchFit> lifted = lifted_at_tip(surface, plain, o)) {
-    if (o.on_stage) o.on_stage("sliding the cylinder up its axis where its end would enter the part");
-    PatchFit m = machine_and_trim(surface, *lifted, o);
-    if (machinable(m) && (!machinable(best) || m.coverage > best.coverage)) best = std::move(m), base = std::move(*lifted), shortened = true;
-  }
   // Still trimmed for the shank or holder: the cutter made longer at its holder end.
   if (best.check_trim && best.check_trim->body)
     if (std::optional<PatchFit> longer = lengthened_at_holder(base, o)) {
@@ -407,6 +401,25 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   if (a != b) return tip_at_a(b ? std::move(refit) : std::move(best));
   if (a && refit.coverage > best.coverage) return tip_at_a(std::move(refit));
   return tip_at_a(std::move(best));  // the better clear one, or neither clear: reported with its collisions
+}
+
+std::optional<PatchFit> lifted_instead_of_ground(const SurfaceIndex& surface, const PatchFit& ground, const PatchOptions& options) {
+  if (!options.fit.check.part || ground.fit.tool.shape != ToolShape::Cylinder || !(ground.tip_shortened > 0)) return std::nullopt;
+  PatchOptions o = options;
+  o.fit.check.up = mean_axis(ground.fit.rails);  // the tip at a, as with_check leaves a checked patch
+  PatchFit whole = ground;
+  const ToolCut back = cut_tool(ground.fit.rails, ground.fit.tool, -ground.tip_shortened / ground.fit.rails.length, 1);
+  whole.fit.rails = back.rails;
+  whole.tip_shortened = 0;
+  std::optional<PatchFit> lifted = lifted_at_tip(surface, whole, o);
+  if (!lifted) return std::nullopt;
+  PatchFit m = machine_and_trim(surface, std::move(*lifted), o);
+  if (!machinable(m)) return std::nullopt;
+  // Its kept stretch in the parameter of the motion `ground` was trimmed from.
+  const double w = ground.t_to - ground.t_from;
+  m.t_to = ground.t_from + w * m.t_to;
+  m.t_from = ground.t_from + w * m.t_from;
+  return m;
 }
 
 std::pair<double, double> ungouged_range(const MachinedSurface& ms, double tolerance) {
