@@ -777,26 +777,33 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       pool.clear();
     }
   }
-  // Cylinders ground shorter at their tip: slid up their axis instead where that covers more of the
-  // surface with the other patches as they are (lifted_instead_of_ground).
+  // A second look at each chosen patch, judged by what it adds to the others as they are: kept when
+  // the union covers more. (Refitting a trimmed patch over the stretch it kept was tried here too:
+  // the HECC impeller's cover went from 58.7% to 58.8% for eight more fits.)
+  const auto covered_by_others = [&](size_t k) {
+    std::vector<const MachinedSurface*> others;
+    for (size_t j = 0; j < fits.size(); ++j)
+      if (j != k) others.push_back(&fits[j].machined);
+    const UnionDeviation u = union_deviation(others, nv);
+    std::vector<char> c(nv);
+    for (size_t v = 0; v < nv; ++v) c[v] = std::isfinite(u.deviation[v]) && std::abs(u.deviation[v]) <= tol;
+    return c;
+  };
+  const auto offer_instead = [&](size_t k, PatchFit alt) {
+    const std::vector<char> by_others = covered_by_others(k);
+    if (!(gain_of(alt, by_others, area, tol) > gain_of(fits[k], by_others, area, tol) + 1e-4)) return;
+    fits[k] = std::move(alt);
+    update_union();
+    recount_gains();
+  };
   if (o.patch.fit.check.part)
     for (size_t k = 0; k < fits.size(); ++k) {
-      if (fits[k].fit.tool.shape != ToolShape::Cylinder || !(fits[k].tip_shortened > 0)) continue;
-      report("sliding patch " + std::to_string(k + 1) + "'s cylinder up its axis instead of grinding it shorter");
-      PatchOptions po = o.patch;
-      po.trim_gouges = true;
-      std::optional<PatchFit> lifted = lifted_instead_of_ground(surface, fits[k], po);
-      if (!lifted) continue;
-      std::vector<const MachinedSurface*> others;
-      for (size_t j = 0; j < fits.size(); ++j)
-        if (j != k) others.push_back(&fits[j].machined);
-      const UnionDeviation u = union_deviation(others, nv);
-      std::vector<char> by_others(nv);
-      for (size_t v = 0; v < nv; ++v) by_others[v] = std::isfinite(u.deviation[v]) && std::abs(u.deviation[v]) <= tol;
-      if (gain_of(*lifted, by_others, area, tol) > gain_of(fits[k], by_others, area, tol) + 1e-4) {
-        fits[k] = std::move(*lifted);
-        update_union();
-        recount_gains();
+      // A cylinder ground shorter at its tip: slid up its axis instead (lifted_instead_of_ground).
+      if (fits[k].fit.tool.shape == ToolShape::Cylinder && fits[k].tip_shortened > 0) {
+        report("sliding patch " + std::to_string(k + 1) + "'s cylinder up its axis instead of grinding it shorter");
+        PatchOptions po = o.patch;
+        po.trim_gouges = true;
+        if (std::optional<PatchFit> lifted = lifted_instead_of_ground(surface, fits[k], po)) offer_instead(k, std::move(*lifted));
       }
     }
   out.coverage_held_tool = out.coverage;

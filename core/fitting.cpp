@@ -1,6 +1,7 @@
 #include "core/fitting.h"
 
 #include <ceres/ceres.h>
+#include <fmt/format.h>
 
 #include <Eigen/Dense>
 #include <Eigen/Geometry>
@@ -341,16 +342,23 @@ std::vector<Eigen::Vector2d> meridian(const ToolRadius& tool, double length, int
 std::optional<ToolDefect> tool_defect(const ToolRadius& tool, double length) {
   const RadiusProfile p = tool.profile();
   const int n = 240;
-  double z_before = -INFINITY;
+  double z_before = -INFINITY, d_most = 0;
   for (int k = 0; k <= n; ++k) {
     const double s = double(k) / n;
     const double d = p.d(s), dz = p.d_s(s) / length;
+    d_most = std::max(d_most, d);
     if (!(d > 0)) return ToolDefect{s, "its radius reaches 0"};
     if (!(std::abs(dz) < 1)) return ToolDefect{s, "its radius changes faster than its length (no meridian)"};
     const double z = s * length - d * dz;  // as meridian()
     if (!(z > z_before)) return ToolDefect{s, "its meridian turns back on itself"};
     z_before = z;
   }
+  // A needle: the fit may shrink a cylinder until its axis lies in Φ (HECC diffuser: Ø0.009 mm over
+  // 19.9 mm), which no shop can make nor cut with.
+  if (length > kMaxSlenderness * 2 * d_most)
+    return ToolDefect{0.5, fmt::format("it is {:.0f} times as long as its largest diameter (at most {:.0f}: no tool that "
+                                       "slender can be made or cut with)",
+                                       length / (2 * d_most), kMaxSlenderness)};
   return std::nullopt;
 }
 

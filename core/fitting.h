@@ -213,12 +213,16 @@ struct ErrorStats {
 
 // Where the radii d(s) over an axis of `length` describe no tool of revolution: a sphere radius
 // d <= 0, a slope |d'(z)| >= 1 (the circles nest inside each other: no meridian touches them all), or
-// a meridian whose z turns back (the envelope of the circles folds). Checked at 241 points; none
-// for every real tool. A fit on a stretch where Φ holds few samples can drift there.
+// a meridian whose z turns back (the envelope of the circles folds), or a needle longer than
+// kMaxSlenderness times its largest diameter. Checked at 241 points; none for every real tool. A
+// fit on a stretch where Φ holds few samples can drift there; a cylinder fitted to a ruled flank
+// can shrink until its axis lies in it.
 struct ToolDefect {
   double s = 0;           // where along the axis, 0 (tip end) .. 1
   std::string what;       // "its radius reaches 0", ...
 };
+// Cutting length over largest diameter beyond which tool_defect calls a tool a needle.
+constexpr double kMaxSlenderness = 20;
 [[nodiscard]] std::optional<ToolDefect> tool_defect(const ToolRadius& tool, double length);
 
 // The radii projected onto the constraints (least change of the parameters D): every row

@@ -517,6 +517,18 @@ TEST_CASE("tool_defect finds radii that describe no tool, and such a fit is not 
   REQUIRE(fold);
   CHECK(fold->what == "its meridian turns back on itself");
   CHECK_FALSE(tool_defect(general({0.2, 0.15, 0.15, 0.2}), 0.3));  // the same waist on a longer axis
+  // A needle: more than 20 times as long as its largest diameter (the HECC diffuser's detection had
+  // kept a Ø0.009 mm cylinder over 19.9 mm, and one of Ø0.89 mm).
+  ToolRadius cylinder;
+  cylinder.shape = ToolShape::Cylinder;
+  cylinder.D = {0.01};
+  CHECK_FALSE(tool_defect(cylinder, 0.39));  // 19.5 diameters
+  const std::optional<ToolDefect> needle = tool_defect(cylinder, 0.41);
+  REQUIRE(needle);
+  CHECK(needle->what.find("20 times as long as its largest diameter") != std::string::npos);
+  cone.D = {0.001, 0.02};  // a sharp taper is judged by its thick end
+  CHECK_FALSE(tool_defect(cone, 0.79));
+  CHECK(tool_defect(cone, 0.81));
   PatchFit f;
   f.fit.rails.length = 1.0;
   f.fit.tool = general({0.1, 0.12, 0.13, 0.12, 0.1});
