@@ -574,17 +574,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     out.coverage = coverage(m, out.deviation, tol);
     for (size_t v = 0; v < nv; ++v) covered[v] = std::isfinite(out.deviation[v]) && std::abs(out.deviation[v]) <= tol;
   };
-  // What each patch brings first, in the order they were found (after patches were replaced).
-  const auto recount_gains = [&]() {
-    std::fill(covered.begin(), covered.end(), 0);
-    for (size_t k = 0; k < fits.size(); ++k) {
-      gains[k] = gain_of(fits[k], covered, area, tol);
-      for (size_t v = 0; v < nv; ++v) {
-        const double d = fits[k].machined.design_deviation[v];
-        covered[v] |= std::isfinite(d) && std::abs(d) <= tol;
-      }
-    }
-  };
   update_union();
   out.stop = CoverStop::NoProgress;
   out.shared_tool = o.shared_tool || o.patch.fit.fixed_tool.has_value();
@@ -777,35 +766,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       pool.clear();
     }
   }
-  // A second look at each chosen patch, judged by what it adds to the others as they are: kept when
-  // the union covers more. (Refitting a trimmed patch over the stretch it kept was tried here too:
-  // the HECC impeller's cover went from 58.7% to 58.8% for eight more fits.)
-  const auto covered_by_others = [&](size_t k) {
-    std::vector<const MachinedSurface*> others;
-    for (size_t j = 0; j < fits.size(); ++j)
-      if (j != k) others.push_back(&fits[j].machined);
-    const UnionDeviation u = union_deviation(others, nv);
-    std::vector<char> c(nv);
-    for (size_t v = 0; v < nv; ++v) c[v] = std::isfinite(u.deviation[v]) && std::abs(u.deviation[v]) <= tol;
-    return c;
-  };
-  const auto offer_instead = [&](size_t k, PatchFit alt) {
-    const std::vector<char> by_others = covered_by_others(k);
-    if (!(gain_of(alt, by_others, area, tol) > gain_of(fits[k], by_others, area, tol) + 1e-4)) return;
-    fits[k] = std::move(alt);
-    update_union();
-    recount_gains();
-  };
-  if (o.patch.fit.check.part)
-    for (size_t k = 0; k < fits.size(); ++k) {
-      // A cylinder ground shorter at its tip: slid up its axis instead (lifted_instead_of_ground).
-      if (fits[k].fit.tool.shape == ToolShape::Cylinder && fits[k].tip_shortened > 0) {
-        report("sliding patch " + std::to_string(k + 1) + "'s cylinder up its axis instead of grinding it shorter");
-        PatchOptions po = o.patch;
-        po.trim_gouges = true;
-        if (std::optional<PatchFit> lifted = lifted_instead_of_ground(surface, fits[k], po)) offer_instead(k, std::move(*lifted));
-      }
-    }
   out.coverage_held_tool = out.coverage;
   if (sharing && fits.size() > 1) {
     // One joint refit of every patch with one tool (eq. 12 summed over the patches, the radii free
@@ -826,7 +786,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         f.fit = std::move(joint[k]);
         f.tip_shortened = 0;
         f.holder_lengthened = 0;
-        f.tip_lifted = 0;
         f = po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
         if (!machinable(f)) break;
         refit.push_back(std::move(f));
@@ -842,7 +801,15 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         fits = std::move(refit);
         update_union();
         out.joint_refit = true;
-        recount_gains();
+        // What each patch brings first, in the order they were found.
+        std::fill(covered.begin(), covered.end(), 0);
+        for (size_t k = 0; k < fits.size(); ++k) {
+          gains[k] = gain_of(fits[k], covered, area, tol);
+          for (size_t v = 0; v < nv; ++v) {
+            const double d = fits[k].machined.design_deviation[v];
+            covered[v] |= std::isfinite(d) && std::abs(d) <= tol;
+          }
+        }
       }
     }
     report(out.joint_refit ? "joint refit kept" : "joint refit not kept (the held tool covers more)");

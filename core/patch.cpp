@@ -252,74 +252,6 @@ std::optional<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& 
   return f;
 }
 
-// A cylinder slid up its own axis pose by pose, just far enough for its end to keep out of the part:
-// its side sweeps the same flank wherever along it the contact lies, so where the hub under the flank
-// rises the tip rises with it and elsewhere it stays down, while cut_at_tip grinds the whole tool
-// shorter by what the worst pose needs. The lift per row is the least of 0, 5%, ... 60% of the
-// length that keeps the row clear by the check profile, widened to the neighbouring rows (the rails
-// through the lifted samples are a least-squares spline), and the rails are refitted through the
-// lifted axis. The length stays: the lifted cutter's far end passes correspondingly higher.
-// None for other shapes, for a fixed tool's motion when no row needs a lift, or when no lift helps.
-std::optional<PatchFit> lifted_at_tip(const SurfaceIndex& surface, const PatchFit& plain, const PatchOptions& o) {
-  if (plain.fit.tool.shape != ToolShape::Cylinder) return std::nullopt;
-  const Rails& r = plain.fit.rails;
-  const bool tip_at_a = tip_is_a(r, o.fit.check);
-  const int rows = 2 * o.fit.samples_t, steps = 12;
-  std::vector<int> need(static_cast<size_t>(rows), -1);  // least clear step per row (-1: none)
-  for (int k = 0; k <= steps; ++k) {
-    const double c = 0.05 * k;
-    const ToolCut up = tip_at_a ? cut_tool(r, plain.fit.tool, c, 1 + c) : cut_tool(r, plain.fit.tool, -c, 1 - c);
-    const CheckProfile p = check_profile(up.rails, up.tool, o.fit.check, rows, o.fit.samples_s);
-    for (int i = 0; i < rows; ++i)
-      if (need[size_t(i)] < 0 && !(p.intrusion[size_t(i)] > 0)) need[size_t(i)] = k;
-    if (std::none_of(need.begin(), need.end(), [](int v) { return v < 0; })) break;
-  }
-  if (std::all_of(need.begin(), need.end(), [](int v) { return v == 0; })) return std::nullopt;
-  if (std::all_of(need.begin(), need.end(), [](int v) { return v < 0; })) return std::nullopt;
-  // Rows never clear keep the largest lift (trimming decides there); then each row takes the most its
-  // neighbours within 2 rows need.
-  std::vector<double> lift(static_cast<size_t>(rows));
-  for (int i = 0; i < rows; ++i) {
-    int most = 0;
-    for (int j = std::max(0, i - 2); j <= std::min(rows - 1, i + 2); ++j) most = std::max(most, need[size_t(j)] < 0 ? steps : need[size_t(j)]);
-    lift[size_t(i)] = 0.05 * most;
-  }
-  // The lift as a cubic spline on the rails' knots that nowhere falls below what a row needs (a
-  // least-squares fit of the steps would dip under them beside each step): the rows' targets are
-  // raised by their deficit until it is gone.
-  const std::vector<double> ts = uniform_parameters(rows);
-  Eigen::MatrixXd target(rows, 1);
-  for (int i = 0; i < rows; ++i) target(i, 0) = lift[size_t(i)];
-  BSpline smooth;
-  for (int round = 0; round < 20; ++round) {
-    smooth = fit_bspline(target, ts, r.a.size());
-    double worst = 0;
-    for (int i = 0; i < rows; ++i) {
-      const double deficit = lift[size_t(i)] - smooth.value(ts[size_t(i)]);
-      if (deficit > 0) target(i, 0) += 1.5 * deficit, worst = std::max(worst, deficit);
-    }
-    if (!(worst > 1e-4)) break;
-  }
-  Eigen::MatrixXd A(rows, 3), B(rows, 3);
-  double most = 0;
-  for (int i = 0; i < rows; ++i) {
-    const double up = std::max(0.0, smooth.value(ts[size_t(i)]));
-    most = std::max(most, up);
-    const double lo = tip_at_a ? up : -up;
-    A.row(i) = r.point(ts[size_t(i)], lo).transpose();
-    B.row(i) = r.point(ts[size_t(i)], lo + 1).transpose();
-  }
-  PatchFit f = plain;
-  f.fit.rails = {fit_bspline(A, ts, r.a.size()), fit_bspline(B, ts, r.b.size()), r.length};
-  f.tip_lifted = most * r.length;
-  try {
-    f.fit.eps_opt = sample_error(surface, f.fit.rails, f.fit.tool, o.fit);
-  } catch (const InputError&) {
-    return std::nullopt;
-  }
-  return f;
-}
-
 // The cutter made longer at its holder end (the side continued beyond s = 1: exact for cylinders
 // and cones, within a tenth of the tolerance for a general meridian, as cut_tool) so that the shank
 // starts farther out: a flank whose edge the cutter's end reaches (the HECC diffuser's shroud side)
@@ -401,25 +333,6 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   if (a != b) return tip_at_a(b ? std::move(refit) : std::move(best));
   if (a && refit.coverage > best.coverage) return tip_at_a(std::move(refit));
   return tip_at_a(std::move(best));  // the better clear one, or neither clear: reported with its collisions
-}
-
-std::optional<PatchFit> lifted_instead_of_ground(const SurfaceIndex& surface, const PatchFit& ground, const PatchOptions& options) {
-  if (!options.fit.check.part || ground.fit.tool.shape != ToolShape::Cylinder || !(ground.tip_shortened > 0)) return std::nullopt;
-  PatchOptions o = options;
-  o.fit.check.up = mean_axis(ground.fit.rails);  // the tip at a, as with_check leaves a checked patch
-  PatchFit whole = ground;
-  const ToolCut back = cut_tool(ground.fit.rails, ground.fit.tool, -ground.tip_shortened / ground.fit.rails.length, 1);
-  whole.fit.rails = back.rails;
-  whole.tip_shortened = 0;
-  std::optional<PatchFit> lifted = lifted_at_tip(surface, whole, o);
-  if (!lifted) return std::nullopt;
-  PatchFit m = machine_and_trim(surface, std::move(*lifted), o);
-  if (!machinable(m)) return std::nullopt;
-  // Its kept stretch in the parameter of the motion `ground` was trimmed from.
-  const double w = ground.t_to - ground.t_from;
-  m.t_to = ground.t_from + w * m.t_to;
-  m.t_from = ground.t_from + w * m.t_from;
-  return m;
 }
 
 std::pair<double, double> ungouged_range(const MachinedSurface& ms, double tolerance) {

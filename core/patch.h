@@ -70,7 +70,6 @@ struct PatchFit {
   bool check_refused = false;
   double tip_shortened = 0;  // length ground off the cutter's tip end to keep it out of the part (unit frame)
   double holder_lengthened = 0;  // length added to the cutter at its holder end to keep the shank clear (unit frame)
-  double tip_lifted = 0;  // the most a cylinder was slid up its axis at one pose to keep its end out of the part (unit frame)
   std::optional<ExploredLine> explored;     // line-driven only
   std::optional<LineTrajectory> trajectory;  // line-driven only
 };
@@ -95,17 +94,6 @@ struct PatchFit {
 // when the fit is clear already, it is only machined and measured. fit_patch fits this way, and
 // `patches: auto` applies it to every detected patch.
 [[nodiscard]] PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOptions& options);
-
-// A checked cylinder patch whose tool was ground shorter at its tip (tip_shortened > 0) with its tip
-// given back and the cylinder instead slid up its axis pose by pose, only as far as the part needs
-// there (its side sweeps the same flank wherever the contact lies): the band the cut left is lost
-// only where the hub rises. Machined and trimmed like the patch; none when it is not a cylinder, was
-// not ground, or the lifted motion is not machinable. Detection offers it per patch once the cover is
-// chosen and keeps it when the union covers more (the greedy cover itself is not changed: offered
-// inside with_check it made every candidate's own coverage higher and the HECC diffuser's cover
-// worse, 88.7% instead of 94.2%).
-[[nodiscard]] std::optional<PatchFit> lifted_instead_of_ground(const SurfaceIndex& surface, const PatchFit& ground,
-                                                               const PatchOptions& options);
 
 // The cutter restricted to s in [lo, hi] of its axis (the rest ground off): rails through the new
 // ends, the radii re-parametrised over the shorter axis (exact for cylinders and cones, a

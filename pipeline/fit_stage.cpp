@@ -243,9 +243,6 @@ void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, con
   if (fp.fit.tip_shortened > 0)
     progress(fmt::format("patch {}: the tool ground {:.3f} mm shorter at its tip to keep its end out of the part", name,
                          out.frame.length_to_mm(fp.fit.tip_shortened)));
-  if (fp.fit.tip_lifted > 0)
-    progress(fmt::format("patch {}: the cylinder slid up its axis by up to {:.3f} mm, pose by pose, to keep its end out of the part",
-                         name, out.frame.length_to_mm(fp.fit.tip_lifted)));
   if (fp.fit.holder_lengthened > 0)
     progress(fmt::format("patch {}: the cutter made {:.3f} mm longer at its holder end to keep the shank clear of the part", name,
                          out.frame.length_to_mm(fp.fit.holder_lengthened)));
@@ -283,7 +280,6 @@ void share_tool(const Job& job, const std::vector<const SurfaceIndex*>& targets,
     fp.fit.fit = std::move(fits[k]);
     fp.fit.tip_shortened = 0;
     fp.fit.holder_lengthened = 0;
-    fp.fit.tip_lifted = 0;
     fp.fit = machine_and_trim(*targets[k], std::move(fp.fit), options[k]);
     report_fit(job, out, fp, progress);
   }
@@ -692,7 +688,6 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
                                 {"worst_intrusion_mm", round_mm(fr.length_to_mm(p.fit.check_intrusion))},
                                 {"tip_shortened_mm", round_mm(fr.length_to_mm(p.fit.tip_shortened))},
                                 {"holder_end_lengthened_mm", round_mm(fr.length_to_mm(p.fit.holder_lengthened))},
-                                {"tip_lifted_mm", round_mm(fr.length_to_mm(p.fit.tip_lifted))},
                                 {"refused", p.fit.check_refused}};
     if (const auto& t = p.fit.check_trim)
       c["trimmed_because"] = {{"component", t->body ? "shank or holder" : "cutter"},

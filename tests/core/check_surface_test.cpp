@@ -401,55 +401,6 @@ TEST_CASE("cut_tool keeps the swept tool: rails and radii of the part that stays
   }
 }
 
-TEST_CASE("a cylinder ground shorter over a hub that rises along the motion is slid up its axis instead, only where the hub rises" * doctest::test_suite("heavy")) {
-  // The hub level (z = 0) under the flank up to y = 30, then rising 1 in 10 (2.5 mm at y = 55). Ground
-  // shorter, the whole cylinder would lose the band the highest pose needs (2.5+ of the flank's 20 mm,
-  // along its whole length); slid up pose by pose it loses it only where the hub rises.
-  Setup s;
-  TriMesh hub_mm = box_mesh({0, -20, -10}, {30, 80, 0}, 4);  // top vertices at y = -20, 5, 30, 55, 80
-  for (Eigen::Vector3d& p : hub_mm.vertices)
-    if (p.z() > -1e-9) p.z() = 0.1 * std::max(0.0, p.y() - 30);
-  const SurfaceIndex hub(to_unit(hub_mm, s.fr));
-  s.o.shape = ToolShape::Cylinder;
-  PatchOptions po = s.patch_options();
-  const PatchSpec spec = s.upright();
-  const PatchFit free = fit_patch(s.phi, spec, po);
-  po.fit.check.part = &hub;
-  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
-  po.fit.check.body = s.body();
-  const PatchFit ground = fit_patch(s.phi, spec, po);
-  // The fit grinds the cylinder shorter by what its highest pose needs (2.5 mm and the 5% step).
-  CHECK(s.fr.length_to_mm(ground.tip_shortened) > 2.4);
-  const std::optional<PatchFit> lifted = lifted_instead_of_ground(s.phi, ground, po);
-  REQUIRE(lifted);
-  const PatchFit& f = *lifted;
-  const auto tip_mm = [&](double t) { return s.fr.to_mm(f.fit.rails.a.point(t)); };
-  MESSAGE("lifted up to ", s.fr.length_to_mm(f.tip_lifted), " mm (ground: ", s.fr.length_to_mm(ground.tip_shortened),
-          " mm shorter, coverage ", ground.coverage, "); tip z ", tip_mm(0).z(), " at y ", tip_mm(0).y(), ", ", tip_mm(1).z(),
-          " at y ", tip_mm(1).y(), "; coverage ", f.coverage, " (without the hub ", free.coverage, "), eps ",
-          s.fr.length_to_mm(f.fit.eps_opt.max), " mm");
-  CHECK(f.tip_shortened == 0);
-  CHECK(s.fr.length_to_mm(f.tip_lifted) > 2.4);
-  CHECK(s.fr.length_to_mm(f.fit.rails.length) == doctest::Approx(s.fr.length_to_mm(free.fit.rails.length)));
-  CHECK(f.check_intrusion <= 0);
-  CHECK(!f.check_refused);
-  CHECK(f.t_from == 0.0);
-  CHECK(f.t_to == 1.0);
-  // Down on the level hub where it is level; above the hub where it rises (the rim reaches y + 5).
-  for (int i = 0; i <= 20; ++i) {
-    const Eigen::Vector3d tip = tip_mm(i / 20.0);
-    CAPTURE(tip.transpose());
-    if (tip.y() < 15) CHECK(tip.z() < 0.05);
-    CHECK(tip.z() > 0.1 * std::max(0.0, tip.y() + 5 - 30) - 0.01);
-  }
-  CHECK(s.fr.length_to_mm(f.fit.eps_opt.max) < 0.01);
-  // Ground 2.5+ mm shorter the tool loses 2.5 x 45 mm of the ~50 x 20 it covers (~11%).
-  CHECK(ground.coverage < 0.9 * free.coverage);
-  CHECK(f.coverage > 0.93 * free.coverage);
-  // Not a cylinder, or not ground: nothing to offer.
-  CHECK(!lifted_instead_of_ground(s.phi, free, po));
-}
-
 TEST_CASE("a ball end is checked as its ball: shortened less than a flat end over the same hub" * doctest::test_suite("heavy")) {
   Setup s;
   const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
