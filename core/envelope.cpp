@@ -120,10 +120,12 @@ EnvelopeGrid envelope_grid(const LineMotion& m, const RadiusProfile& profile, in
     const auto& P = g.mesh.vertices;
     const auto& f0 = g.mesh.faces[0];
     const bool flip = (P[f0[1]] - P[f0[0]]).cross(P[f0[2]] - P[f0[0]]).dot(normals[f0[0]]) > 0;
-    for (auto& f : g.mesh.faces) {
+    g.folded.assign(g.mesh.faces.size(), 0);
+    for (size_t k = 0; k < g.mesh.faces.size(); ++k) {
+      auto& f = g.mesh.faces[k];
       if (flip) std::swap(f[1], f[2]);
       const Eigen::Vector3d fn = (P[f[1]] - P[f[0]]).cross(P[f[2]] - P[f[0]]);
-      if (fn.dot(normals[f[0]] + normals[f[1]] + normals[f[2]]) >= 0) ++g.folded_triangles;
+      if (fn.dot(normals[f[0]] + normals[f[1]] + normals[f[2]]) >= 0) ++g.folded_triangles, g.folded[k] = 1;
     }
   }
   return g;

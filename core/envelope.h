@@ -51,6 +51,7 @@ struct EnvelopeGrid {
   int n_s = 0, n_t = 0;
   int invalid_points = 0;
   int folded_triangles = 0;            // faces whose normal disagrees with the sphere normal (sheet folds)
+  std::vector<char> folded;            // per face: 1 for those
 };
 // Samples the envelope on a uniform (t, s) grid over [t0, t1] x [s0, 1]. Faces touching an invalid
 // point are left out. s0 > 0: the side above a rounded tool end (core/tool_end.h).
