@@ -29,7 +29,7 @@ int run_verify(const VerifyArgs& args) {
         fmt::print("{}: clean, {} motion blocks, min rapid clearance {:.3f} mm, {:.1f}% of the design surface's vertices it "
                    "reaches within {} mm ({:.1f}% of them all){}\n",
                    r.file, v.blocks.size(), r.min_rapid_all_mm(), 100 * v.design.coverage(), run.options.gouge_tolerance_mm,
-                   v.design.deviation_mm.empty() ? 0.0 : 100.0 * v.design.within / double(v.design.deviation_mm.size()),
+                   100 * v.design.share_of_all(),
                    v.cl_compared ? fmt::format(", {} cutting blocks on the CL-data within {} mm", v.cl_blocks,
                                                run.options.cl_tolerance_mm)
                                  : "");

@@ -225,6 +225,11 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
   // splitting of the block brings it back) costs kBadFlip minutes: the path stays on its branch and
   // turns C instead, unless nothing else reaches.
   const PreparedForward fk = prepare_forward(m, o.tool_length_mm);
+  // The tool axis the rotary angles give (forward kinematics without the linear axes).
+  const auto axis_of = [&](const std::array<double, 2>& deg) {
+    const Trig tr = trig_of(deg);
+    return forward(fk, Eigen::Vector3d::Zero(), tr.c, tr.s).axis;
+  };
   const double cos_flip = std::cos(o.angle_tolerance_deg * kRadPerDeg);
   constexpr double kBadFlip = 1e6;
   const auto flip_leaves_axis = [&](int i, const std::array<double, 2>& from, const std::array<double, 2>& to) {
@@ -232,9 +237,8 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     for (const double f : {0.25, 0.5, 0.75}) {
       std::array<double, 2> deg{};
       for (size_t k = 0; k < 2; ++k) deg[k] = (1 - f) * from[k] + f * to[k];
-      const Trig tr = trig_of(deg);
       const Eigen::Vector3d want = motion ? motion((1 - f) * t[size_t(i - 1)] + f * t[size_t(i)]).axis : slerp.at(f).axis;
-      if (forward(fk, Eigen::Vector3d::Zero(), tr.c, tr.s).axis.dot(want.normalized()) < cos_flip) return true;
+      if (axis_of(deg).dot(want.normalized()) < cos_flip) return true;
     }
     return false;
   };
@@ -395,10 +399,6 @@ JointPath solve_path(const Machine& m, const std::vector<ToolPose>& poses, std::
     // passing the vertical closer than that crosses A = 0 without C turning, and C joins its exact
     // values smoothly beyond.
     const bool near_singular_axis = singularity_cosine(m, p.axis) > cos_zone;
-    const auto axis_of = [&](const std::array<double, 2>& deg) {
-      const Trig tr = trig_of(deg);
-      return forward(fk, Eigen::Vector3d::Zero(), tr.c, tr.s).axis;
-    };
     std::optional<Joints> best;
     double best_d = kInf;
     for (const RotarySolution& s : rotary_solution_pair(m, p.axis)) {

@@ -304,8 +304,7 @@ void write_verify(const VerifyRun& run, OutputDir& out) {
     e["cut_minutes"] = r4(v.cut_minutes);
     e["design_surface"] = {{"vertices_reached", v.design.reached}, {"within_tolerance", v.design.within},
                            {"coverage", r4(v.design.coverage())},
-                           {"share_of_all_vertices",
-                            r4(v.design.deviation_mm.empty() ? 0.0 : double(v.design.within) / double(v.design.deviation_mm.size()))}};
+                           {"share_of_all_vertices", r4(v.design.share_of_all())}};
     e["blocks"] = {{"columns", {"line", "motion", "cutter_mm", "shank_mm", "holder_mm"}}, {"rows", blocks}};
     programs.push_back(e);
 

@@ -114,6 +114,8 @@ struct Deviation {  // the machined design surface Φ (when one is given)
   int reached = 0, within = 0;       // vertices reached, and of those within the tolerance
   double tolerance_mm = 0;
   [[nodiscard]] double coverage() const { return reached > 0 ? double(within) / reached : 0; }
+  // The same share of all of Φ's vertices.
+  [[nodiscard]] double share_of_all() const { return deviation_mm.empty() ? 0 : double(within) / double(deviation_mm.size()); }
 };
 
 // One simulated position, kept for the 3D view's playback (postproc/verify_view.h).
