@@ -143,7 +143,12 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
     // leaves, so not a deviation of it (HECC diffuser: a patch with 1,408 folded faces claimed 23.6%
     // of the vane, its program's back-simulation cut 3.7%). Left to other patches, or uncovered.
     if (out.omega.folded[size_t(on_omega[v].face)]) continue;
-    out.design_deviation[v] = (on_omega[v].point - design.mesh().vertices[v]).dot(out.tool_side * normals[v]);
+    // The distance to Ω, signed by the side: Ω's nearest point can lie far aside with almost nothing
+    // along Φ's normal where Ω crosses Φ steeply (a curled envelope, or one standing across Φ); the
+    // normal component alone had called such vertices machined (HECC diffuser: a hub-row vertex 13.3 mm
+    // from Ω, 0.002 mm along its normal).
+    const Eigen::Vector3d to_omega = on_omega[v].point - design.mesh().vertices[v];
+    out.design_deviation[v] = std::copysign(to_omega.norm(), to_omega.dot(out.tool_side * normals[v]));
     out.design_row[v] = out.omega.mesh.faces[size_t(on_omega[v].face)][0] / out.omega.n_s;
   }
   // The swept solid, not only its envelope: where the cutter at some pose holds a vertex deeper than

@@ -26,7 +26,7 @@ struct MachinedSurface {
   int tool_side = 1;                      // +1: Φ's normals point to the tool (out of the material)
   std::vector<double> omega_deviation;    // per Ω vertex: signed distance to Φ along Φ's tool-side
                                           // normal (undercut > 0, overcut < 0); NaN beyond Φ
-  std::vector<double> design_deviation;   // per Φ vertex: the same measured from Ω; NaN where Ω does
+  std::vector<double> design_deviation;   // per Φ vertex: its distance to Ω, signed as above; NaN where Ω does
                                           // not cover the vertex, its nearest Ω point is on a fold, or
                                           // the cutter at some pose holds it deeper than that says
   std::vector<int> design_row;            // per Φ vertex: the Ω grid row (t index) of its closest point; -1: none

@@ -148,3 +148,46 @@ TEST_CASE("a folded envelope is no machined surface: Φ where only the fold pass
   CHECK(counted_there == 0);
   CHECK(counted_at_r > 0.9 * left_at_r);
 }
+
+TEST_CASE("an envelope standing across Φ machines only where it passes: the distance to Ω, not its normal part") {
+  // A Ø6 cylinder standing upright (axis z from -2 to +2) and travelling 10 mm along x through a flat
+  // Φ (z = 0, y in [-6, 6]): its envelope is the two planes y = ±3, crossing Φ at right angles. A
+  // vertex at y = 3 + e lies e from Ω, with nothing of it along Φ's normal: only the vertices on the
+  // crossing lines are within tolerance; those between them the tool sweeps through.
+  const double r = 3, tol = 0.01;
+  const int samples = 50;
+  Eigen::MatrixXd A(samples, 3), B(samples, 3);
+  const std::vector<double> ts = uniform_parameters(samples);
+  for (int i = 0; i < samples; ++i) {
+    A.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], 0, -2);
+    B.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], 0, 2);
+  }
+  const Rails rails{fit_bspline(A, ts, 8), fit_bspline(B, ts, 8), 4};
+  ToolRadius tool;
+  tool.shape = ToolShape::Cylinder;
+  tool.D = {r};
+  const TriMesh phi_mesh =
+      test::grid_mesh(21, 49, [](int i, int j) { return Eigen::Vector3d(2 + 0.3 * i, -6 + 0.25 * j, 0); });
+  const SurfaceIndex phi(phi_mesh);
+  const MachinedSurface ms = machined_surface(phi, rails, tool);
+  double side = 0;  // the sheet's plane: y = side * r
+  for (const auto& w : ms.omega.mesh.vertices) side += w.y();
+  side = side > 0 ? 1 : -1;
+  int counted = 0, on_line = 0, reached_aside = 0;
+  for (size_t v = 0; v < phi_mesh.vertices.size(); ++v) {
+    const double y = phi_mesh.vertices[v].y(), dev = ms.design_deviation[v];
+    const bool within = std::isfinite(dev) && std::abs(dev) <= tol;
+    counted += within;
+    if (std::abs(y - side * r) < 1e-9) {
+      ++on_line;
+      CHECK(within);
+    } else if (std::abs(y) >= r && std::isfinite(dev)) {
+      // Outside the swept slot: its distance to the crossing plane, not 0.
+      ++reached_aside;
+      CHECK(std::abs(dev) == doctest::Approx(std::abs(y - side * r)).epsilon(1e-6));
+    }
+  }
+  CHECK(on_line == 21);
+  CHECK(reached_aside > 300);
+  CHECK(counted == on_line);
+}
