@@ -21,7 +21,8 @@ namespace flankcam {
 template <class Error>
 class YamlFields {
  public:
-  explicit YamlFields(std::string file) : file_(std::move(file)) {}
+  // Messages quote the file's name escaped and cut (a fuzzed or pasted name stays one short line).
+  explicit YamlFields(std::string file) : file_(std::move(file)), shown_(escaped(file_, 200)) {}
 
   // Parses the file; syntax errors name their line. Rejects what yaml-cpp accepts but a reader
   // would misread: duplicate keys (yaml-cpp keeps the first), keys that are lists or mappings.
@@ -30,14 +31,14 @@ class YamlFields {
     try {
       root = YAML::LoadFile(file_);
     } catch (const YAML::DeepRecursion& e) {
-      throw Error(fmt::format("{}:{}: nested too deeply (more than {} levels of lists and mappings)", file_,
+      throw Error(fmt::format("{}:{}: nested too deeply (more than {} levels of lists and mappings)", shown_,
                               e.mark.line + 1, e.depth() - 1));
     } catch (const YAML::BadFile&) {
-      throw Error(file_ + ": cannot open the file");
+      throw Error(shown_ + ": cannot open the file");
     } catch (const YAML::ParserException& e) {
-      throw Error(fmt::format("{}:{}: not valid YAML: {}", file_, e.mark.line + 1, escaped(e.msg)));
+      throw Error(fmt::format("{}:{}: not valid YAML: {}", shown_, e.mark.line + 1, escaped(e.msg)));
     } catch (const YAML::Exception& e) {
-      throw Error(file_ + ": cannot read: " + escaped(e.what()));
+      throw Error(shown_ + ": cannot read: " + escaped(e.what()));
     }
     std::set<std::size_t> seen;
     check_keys(root, "", seen);
@@ -46,8 +47,8 @@ class YamlFields {
 
   [[noreturn]] void fail(const YAML::Node& node, const std::string& key, const std::string& what) const {
     const YAML::Mark m = node.Mark();
-    if (m.is_null()) throw Error(fmt::format("{}: {}: {}", file_, key, what));
-    throw Error(fmt::format("{}:{}: {}: {}", file_, m.line + 1, key, what));
+    if (m.is_null()) throw Error(fmt::format("{}: {}: {}", shown_, key, what));
+    throw Error(fmt::format("{}:{}: {}: {}", shown_, m.line + 1, key, what));
   }
 
   YAML::Node need(const YAML::Node& parent, const std::string& child, const std::string& key) const {
@@ -149,7 +150,7 @@ class YamlFields {
     }
   }
 
-  std::string file_;
+  std::string file_, shown_;
 };
 
 }  // namespace flankcam

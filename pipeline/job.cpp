@@ -247,9 +247,9 @@ Eigen::Matrix3d setup_rotation(const PostJob& post) {
 }
 
 Job read_job(const std::filesystem::path& file) {
-  const std::string name = file.string();
-  if (!is_file(file)) throw InputError(escaped(name, 200) + ": job file not found");
-  const Reader r(name);
+  const std::string name = escaped(file.string(), 200);  // as messages quote it
+  if (!is_file(file)) throw InputError(name + ": job file not found");
+  const Reader r(file.string());
   const YAML::Node root = r.load();
   if (!root.IsMap()) throw InputError(name + ": expected a mapping with surface:, patches:, ...");
   r.only_keys(root, "", {"surface", "part", "holder", "clearance", "check_tolerance", "feed", "spindle", "lead_in", "retract", "tool", "tolerance", "sampling", "weights", "fit", "patches", "cover", "machine", "post", "allowance", "passes", "overtravel", "depth_cuts"});

@@ -81,6 +81,19 @@ TEST_CASE("read_job: a file name the system refuses (too long, control character
     CHECK(message.size() < 400);  // the name is quoted, not copied whole
   }
   CHECK(test::job_error(dir.file(long_name + ".yaml")).find(": job file not found") != std::string::npos);
+  // A job file that exists under such a name: its own errors quote the name escaped and cut too.
+  const std::string odd = dir.file(std::string(230, 'j') + "\n\x01.yaml");
+  CHECK(test::job_error(odd).find("job file not found") != std::string::npos);  // before it is written
+  for (const std::string& yaml : {std::string("feed: 1e-300\nsurface: s.obj\n") + patch, std::string("- a list\n"),
+                                   std::string("surface: s.obj\n"), std::string("feed: [1,\n")}) {
+    CAPTURE(yaml);
+    test::write_text(odd, yaml);
+    const std::string message = test::job_error(odd);
+    CAPTURE(message);
+    CHECK(message.find('\n') == std::string::npos);
+    CHECK(message.find('\x01') == std::string::npos);
+    CHECK(message.size() < 400);
+  }
 }
 
 TEST_CASE("rail and meridian control points: errors name the job's key and line, not FitOptions fields") {
