@@ -139,10 +139,10 @@ bool axial(const ToolPose& p, const ToolPose& q) {
 // A flank in a narrow passage (HECC impeller: the plain lead point's rapid ran the cutter 1.7 mm into
 // the part) is entered from the side that is open. None clear: the plain point (the
 // back-simulation then says what it hits).
-Eigen::Vector3d lead_point(const SurfaceIndex& part, const ToolPose& p, const ToolAssembly& a, double lead, double clearance) {
+// `box`: the part's bounding box.
+Eigen::Vector3d lead_point(const SurfaceIndex& part, const Eigen::AlignedBox3d& box, const ToolPose& p,
+                           const ToolAssembly& a, double lead, double clearance) {
   const Eigen::Vector3d axis = p.axis.normalized(), n = lead_direction(part, p, a.cutter_length());
-  Eigen::AlignedBox3d box;
-  for (const Eigen::Vector3d& v : part.mesh().vertices) box.extend(v);
   const double beyond = (box.center() - p.tip).norm() + 0.5 * box.diagonal().norm() + clearance;
   // The cutter grown by the clearance on its side and below its tip (the grown tip stands that far
   // under q: a floor under the tool's end counts too).
@@ -189,12 +189,14 @@ ClProgram plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAs
   for (const auto& c : a.cutter) rmin = std::min(rmin, c.y()), rmax = std::max(rmax, c.y());
   const double lead = std::max(o.lead_mm, rmax - rmin + o.clearance_mm);
   const ClMove &p0 = cl.moves[first], &p1 = cl.moves[last];
+  Eigen::AlignedBox3d box;
+  for (const Eigen::Vector3d& v : part.mesh().vertices) box.extend(v);
   ClProgram out = cl;
   out.moves.clear();
-  out.moves.push_back({{lead_point(part, p0.pose, a, lead, o.clearance_mm), p0.pose.axis}, true, 0});
+  out.moves.push_back({{lead_point(part, box, p0.pose, a, lead, o.clearance_mm), p0.pose.axis}, true, 0});
   for (size_t k = first; k <= last; ++k) out.moves.push_back(cl.moves[k]);
   out.moves.back().rapid = false;
-  out.moves.push_back({{lead_point(part, p1.pose, a, lead, o.clearance_mm), p1.pose.axis}, false,
+  out.moves.push_back({{lead_point(part, box, p1.pose, a, lead, o.clearance_mm), p1.pose.axis}, false,
                        p1.feed_mm_min > 0 ? p1.feed_mm_min : p0.feed_mm_min});
   for (ClMove& mv : out.moves)
     if (!mv.rapid && !(mv.feed_mm_min > 0)) mv.feed_mm_min = p0.feed_mm_min;
