@@ -583,3 +583,37 @@ TEST_CASE("a fixed tool given by its meridian, fitted to its own exact envelope,
   CHECK(cov >= 0.95);
   CHECK(r.eps_opt.max <= 1e-4);
 }
+
+TEST_CASE("a motion with no sample over the design surface: the fit stops with a reason, it does not abort") {
+  // A flat Φ 10 x 10 (unit frame) and a tool standing 3 beside it: every sample's footpoint is on Φ's
+  // rim, so no round has anything to fit (with the radii held, Ceres aborted on their absent block).
+  const TriMesh phi_mesh = test::grid_mesh(11, 11, [](int i, int j) { return Eigen::Vector3d(i, j, 0); });
+  const SurfaceIndex phi(phi_mesh);
+  const int samples = 40;
+  Eigen::MatrixXd A(samples, 3), B(samples, 3);
+  const std::vector<double> ts = uniform_parameters(samples);
+  for (int i = 0; i < samples; ++i) {
+    A.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], 13, 0.5);
+    B.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], 13, 4.5);
+  }
+  const int cps = FitOptions{}.rail_control_points;
+  const Rails off{fit_bspline(A, ts, cps), fit_bspline(B, ts, cps), 4};
+  ToolRadius cylinder;
+  cylinder.shape = ToolShape::Cylinder;
+  cylinder.D = {1.0};
+  // Radii free: refused up front (the meridian update has no distances to start from).
+  CHECK_THROWS_WITH_AS(optimize_motion(phi, off, FitOptions{}),
+                       "the initial motion is not over the design surface: almost all footpoints lie on its boundary",
+                       InputError);
+  // Radii held (a catalogue or shared tool): the rounds run and stop with the reason.
+  FitOptions o;
+  o.fixed_tool = cylinder;
+  const FitResult fit = optimize_motion(phi, off, o);
+  CHECK(fit.status == FitStatus::SolverFailed);
+  CHECK(fit.message == "no sample of the motion lies over the design surface");
+  // The motion it was given is kept, not a garbage one.
+  for (double t : {0.0, 0.5, 1.0}) {
+    CHECK((fit.rails.a.point(t) - off.a.point(t)).norm() < 1e-9);
+    CHECK((fit.rails.b.point(t) - off.b.point(t)).norm() < 1e-9);
+  }
+}
