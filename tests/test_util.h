@@ -78,6 +78,45 @@ inline TriMesh wavy_grid(int nx, int ny, double sx, double sy, double amplitude)
   });
 }
 
+// A closed box, faces outward; each side split into n x n squares.
+inline TriMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n = 1) {
+  TriMesh m;
+  for (int axis = 0; axis < 3; ++axis)
+    for (int side = 0; side < 2; ++side) {
+      const int u = (axis + 1) % 3, v = (axis + 2) % 3;
+      const int base = int(m.vertices.size());
+      for (int b = 0; b <= n; ++b)
+        for (int a = 0; a <= n; ++a) {
+          Eigen::Vector3d p;
+          p[axis] = side ? hi[axis] : lo[axis];
+          p[u] = lo[u] + (hi[u] - lo[u]) * a / n;
+          p[v] = lo[v] + (hi[v] - lo[v]) * b / n;
+          m.vertices.push_back(p);
+        }
+      for (int b = 0; b < n; ++b)
+        for (int a = 0; a < n; ++a) {
+          const int c = base + b * (n + 1) + a;
+          // (u, v, axis) is right-handed: counter-clockwise in (u, v) faces +axis.
+          if (side)
+            m.faces.push_back({c, c + 1, c + n + 2}), m.faces.push_back({c, c + n + 2, c + n + 1});
+          else
+            m.faces.push_back({c, c + n + 2, c + 1}), m.faces.push_back({c, c + n + 1, c + n + 2});
+        }
+    }
+  // One vertex per corner point: the sides share their edges (a closed mesh).
+  TriMesh out;
+  std::vector<int> index;
+  for (const Eigen::Vector3d& p : m.vertices) {
+    int found = -1;
+    for (size_t k = 0; k < out.vertices.size() && found < 0; ++k)
+      if ((out.vertices[k] - p).norm() < 1e-9) found = int(k);
+    if (found < 0) found = int(out.vertices.size()), out.vertices.push_back(p);
+    index.push_back(found);
+  }
+  for (auto f : m.faces) out.faces.push_back({index[size_t(f[0])], index[size_t(f[1])], index[size_t(f[2])]});
+  return out;
+}
+
 // An exact envelope of an analytic motion, scaled to a unit diagonal (the fitting's frame).
 struct ExactEnvelope {
   LineMotion motion;

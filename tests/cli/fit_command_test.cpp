@@ -232,14 +232,6 @@ std::string obj_text(const flankcam::TriMesh& m) {
   for (const auto& f : m.faces) s += fmt::format("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
   return s;
 }
-// An axis-aligned closed box, faces outward, 12 triangles sharing 8 corners.
-flankcam::TriMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
-  flankcam::TriMesh m;
-  for (int k = 0; k < 8; ++k) m.vertices.emplace_back(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z());
-  m.faces = {{0, 2, 3}, {0, 3, 1}, {4, 5, 7}, {4, 7, 6}, {0, 1, 5}, {0, 5, 4},
-             {2, 6, 7}, {2, 7, 3}, {0, 4, 6}, {0, 6, 2}, {1, 3, 7}, {1, 7, 5}};
-  return m;
-}
 }  // namespace
 
 namespace {
@@ -256,8 +248,8 @@ TEST_CASE("flankcam fit with a part: the part's twin of the flank is left to the
   // end its motion.
   const flankcam::TriMesh flank = test::grid_mesh(31, 11, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * j, 2.0 * k); });
   test::write_text(dir.file("flank.obj"), obj_text(flank));
-  flankcam::TriMesh part = box_mesh({-10, 0, 0}, {0, 60, 20});
-  const flankcam::TriMesh post = box_mesh({1, 52, -10}, {30, 80, 100});
+  flankcam::TriMesh part = test::box_mesh({-10, 0, 0}, {0, 60, 20});
+  const flankcam::TriMesh post = test::box_mesh({1, 52, -10}, {30, 80, 100});
   const int n = int(part.vertices.size());
   part.vertices.insert(part.vertices.end(), post.vertices.begin(), post.vertices.end());
   for (auto f : post.faces) part.faces.push_back({f[0] + n, f[1] + n, f[2] + n});
@@ -308,7 +300,7 @@ TEST_CASE("flankcam run with a part whose coarse twin of a dished flank stands 0
     return Eigen::Vector3d(-0.09 * (1 - u * u), y, 2.0 * k);
   });
   test::write_text(dir.file("flank.obj"), obj_text(flank));
-  test::write_text(dir.file("part.obj"), obj_text(box_mesh({-10, 0, 0}, {0, 60, 20})));
+  test::write_text(dir.file("part.obj"), obj_text(test::box_mesh({-10, 0, 0}, {0, 60, 20})));
   const std::string job =
       "surface: flank.obj\n"
       "part: part.obj\n"

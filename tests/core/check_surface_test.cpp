@@ -20,44 +20,6 @@ TriMesh flank(int ny = 31, int nz = 11) {
   return test::grid_mesh(ny, nz, [&](int j, int k) { return Eigen::Vector3d(0, 60.0 * j / (ny - 1), 20.0 * k / (nz - 1)); });
 }
 
-// A closed box, faces outward; each side split into n x n squares.
-TriMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n = 1) {
-  TriMesh m;
-  for (int axis = 0; axis < 3; ++axis)
-    for (int side = 0; side < 2; ++side) {
-      const int u = (axis + 1) % 3, v = (axis + 2) % 3;
-      const int base = int(m.vertices.size());
-      for (int b = 0; b <= n; ++b)
-        for (int a = 0; a <= n; ++a) {
-          Eigen::Vector3d p;
-          p[axis] = side ? hi[axis] : lo[axis];
-          p[u] = lo[u] + (hi[u] - lo[u]) * a / n;
-          p[v] = lo[v] + (hi[v] - lo[v]) * b / n;
-          m.vertices.push_back(p);
-        }
-      for (int b = 0; b < n; ++b)
-        for (int a = 0; a < n; ++a) {
-          const int c = base + b * (n + 1) + a;
-          // (u, v, axis) is right-handed: counter-clockwise in (u, v) faces +axis.
-          if (side)
-            m.faces.push_back({c, c + 1, c + n + 2}), m.faces.push_back({c, c + n + 2, c + n + 1});
-          else
-            m.faces.push_back({c, c + n + 2, c + 1}), m.faces.push_back({c, c + n + 1, c + n + 2});
-        }
-    }
-  // One vertex per corner point: the sides share their edges (a closed mesh).
-  TriMesh out;
-  std::vector<int> index;
-  for (const Eigen::Vector3d& p : m.vertices) {
-    int found = -1;
-    for (size_t k = 0; k < out.vertices.size() && found < 0; ++k)
-      if ((out.vertices[k] - p).norm() < 1e-9) found = int(k);
-    if (found < 0) found = int(out.vertices.size()), out.vertices.push_back(p);
-    index.push_back(found);
-  }
-  for (auto f : m.faces) out.faces.push_back({index[size_t(f[0])], index[size_t(f[1])], index[size_t(f[2])]});
-  return out;
-}
 
 TriMesh to_unit(TriMesh m, const Similarity& fr) { return transformed(m, fr); }
 
@@ -130,7 +92,7 @@ CollisionReport collisions_mm(const Setup& s, const PatchFit& f, const SurfaceIn
 TEST_CASE("a tool standing next to a wall tilts away instead of cutting it" * doctest::test_suite("heavy")) {
   Setup s;
   // The opposite wall at x >= 14 mm: the upright tool's holder (radius 10 about x = 5) reaches x = 15.
-  const SurfaceIndex wall(to_unit(box_mesh({14, -20, -10}, {30, 80, 100}, 4), s.fr));
+  const SurfaceIndex wall(to_unit(test::box_mesh({14, -20, -10}, {30, 80, 100}, 4), s.fr));
   // The tip keeps its Ø10 (a tool may not simply become thinner and move closer to the flank).
   s.o.constraints.min_tip_radius = s.fr.length_to_unit(4.9);
   s.o.constraints.max_cone_angle_rad = 15 * M_PI / 180;
@@ -162,7 +124,7 @@ TEST_CASE("a tool standing next to a wall tilts away instead of cutting it" * do
 TEST_CASE("a post in the cutter's way: the motion is kept clear of it or trimmed, and says why" * doctest::test_suite("heavy")) {
   Setup s;
   // A post at y >= 52 mm standing where the cutter (Ø10 about x = 5) would end its motion (y = 55).
-  const SurfaceIndex post(to_unit(box_mesh({1, 52, -10}, {30, 80, 100}, 4), s.fr));
+  const SurfaceIndex post(to_unit(test::box_mesh({1, 52, -10}, {30, 80, 100}, 4), s.fr));
   PatchOptions po = s.patch_options();
   po.fit.check.part = &post;
   po.fit.check.tolerance = s.fr.length_to_unit(0.005);
@@ -195,7 +157,7 @@ TEST_CASE("the part's twin of the design surface is left out of the check surfac
   const TriMesh phi_mm = flank(31, 11);
   const SurfaceIndex phi(phi_mm);
   // The blade block behind the flank: its x = 0 side is the flank's twin (4 x 4 squares: 32 triangles).
-  const TriMesh block = box_mesh({-10, 0, 0}, {0, 60, 20}, 4);
+  const TriMesh block = test::box_mesh({-10, 0, 0}, {0, 60, 20}, 4);
   const CheckPart cp = check_part(block, phi, 0.01);
   CHECK(cp.twin_faces == 32);
   CHECK(cp.mesh.faces.size() == block.faces.size() - 32);
@@ -209,7 +171,7 @@ TEST_CASE("the part's twin of the design surface is left out of the check surfac
   CHECK(turned.twin_faces == 32);
   CHECK(signed_volume(merged(turned.mesh, phi_mm)) > 0);  // closed again by the flank: outward
   // A face near the flank but across it (the other side of a thin edge) is kept.
-  const TriMesh thin = box_mesh({-0.005, 0, 0}, {0, 60, 20}, 4);
+  const TriMesh thin = test::box_mesh({-0.005, 0, 0}, {0, 60, 20}, 4);
   CHECK(check_part(thin, phi, 0.01).twin_faces == 32);
 }
 
@@ -220,7 +182,7 @@ TEST_CASE("shank and holder keep their clearance from the design surface too: a 
   const TriMesh phi_mm = test::grid_mesh(31, 51, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * j, 2.0 * k); });
   const Similarity fr = unit_diagonal_frame(phi_mm);
   const SurfaceIndex phi(transformed(phi_mm, fr));
-  const TriMesh block = transformed(box_mesh({-10, 0, 0}, {0, 60, 100}, 4), fr);
+  const TriMesh block = transformed(test::box_mesh({-10, 0, 0}, {0, 60, 100}, 4), fr);
   const CheckPart cp = check_part(block, phi, fr.length_to_unit(0.01));
   REQUIRE(cp.twin_faces == 32);
   const SurfaceIndex part(cp.mesh), solid(block);
@@ -261,7 +223,7 @@ TEST_CASE("a shank passing the flank's edge inside the clearance: the cutter is 
   // clearance all along the motion (the HECC diffuser's shroud side: every patch trimmed for 0.12 mm).
   // Trimming cannot help; a cutter 1-2 mm longer starts the shank above the edge (> 1 mm off it).
   Setup s;
-  const TriMesh block = to_unit(box_mesh({-10, 0, 0}, {0, 60, 20}, 4), s.fr);
+  const TriMesh block = to_unit(test::box_mesh({-10, 0, 0}, {0, 60, 20}, 4), s.fr);
   const CheckPart cp = check_part(block, s.phi, s.fr.length_to_unit(0.01));
   REQUIRE(cp.twin_faces == 32);
   const SurfaceIndex part(cp.mesh), solid(block);
@@ -286,7 +248,7 @@ TEST_CASE("a shank passing the flank's edge inside the clearance: the cutter is 
 }
 
 TEST_CASE("check surface options name the bad field") {
-  const SurfaceIndex wall(box_mesh({14, -20, -10}, {30, 80, 100}));
+  const SurfaceIndex wall(test::box_mesh({14, -20, -10}, {30, 80, 100}));
   FitOptions o;
   o.check.part = &wall;
   CHECK(o.validate().empty());
@@ -307,7 +269,7 @@ namespace {
 // The hub under the flank: a block below z = 0 whose top rises away from the flank, z = 0.3 x (mm),
 // so a flat tool end level with the flank's lower edge enters it (3 mm deep at x = 10).
 TriMesh sloping_hub() {
-  TriMesh hub = box_mesh({0, -20, -10}, {30, 80, 0}, 4);
+  TriMesh hub = test::box_mesh({0, -20, -10}, {30, 80, 0}, 4);
   for (Eigen::Vector3d& p : hub.vertices)
     if (p.z() > -1e-9) p.z() = 0.3 * p.x();
   return hub;
@@ -428,7 +390,7 @@ TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's 
   // (every mm) see it 4.015 mm away, outside the clearance; the trim grows them to enclose their
   // slabs of the shank (as the collision check samples it) and stops the motion before the fin.
   Setup s;
-  const TriMesh fin_mm = box_mesh({8.99, 40, 24.45}, {30, 80, 24.55}, 2);
+  const TriMesh fin_mm = test::box_mesh({8.99, 40, 24.45}, {30, 80, 24.55}, 2);
   const SurfaceIndex fin(to_unit(fin_mm, s.fr)), fin_index_mm(fin_mm);
   PatchOptions po = s.checked_options(fin);
   // A shank of 20 mm here (the fit's samples are balls: the holder's, Ø22 with the clearance,
@@ -466,7 +428,7 @@ TEST_CASE("a fin reaching 0.5 mm into the cutter's side just above its tip, betw
   // from its edge). The trim judges the cutter as the collision check does and stops the motion
   // before the plate.
   Setup s;
-  const TriMesh plate_mm = box_mesh({9.5, 40, 1.2}, {30, 80, 1.3}, 2);
+  const TriMesh plate_mm = test::box_mesh({9.5, 40, 1.2}, {30, 80, 1.3}, 2);
   const SurfaceIndex plate(to_unit(plate_mm, s.fr)), plate_index_mm(plate_mm);
   PatchOptions po = s.checked_options(plate);
   po.fit.check.body = s.body();

@@ -28,13 +28,6 @@ TriMesh plane(double size) {
   return m;
 }
 
-// Closed box [lo, hi].
-TriMesh box(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi) {
-  TriMesh m;
-  for (int k = 0; k < 8; ++k) m.vertices.emplace_back(k & 1 ? hi.x() : lo.x(), k & 2 ? hi.y() : lo.y(), k & 4 ? hi.z() : lo.z());
-  m.faces = {{0, 2, 1}, {1, 2, 3}, {4, 5, 6}, {5, 7, 6}, {0, 1, 4}, {1, 5, 4}, {2, 6, 3}, {3, 6, 7}, {0, 4, 2}, {2, 4, 6}, {1, 3, 5}, {3, 7, 5}};
-  return m;
-}
 
 // A cylinder of radius r around the line (0, y0, z0) + x e_x, x in [x0, x1], n segments.
 TriMesh pipe(double r, double y0, double z0, double x0, double x1, int n) {
@@ -109,7 +102,7 @@ TEST_CASE("a holder passing a thin wall between two clear poses is caught") {
   CollisionOptions o;
   o.clearance_mm = 0.5;
   // Wall 0.2 mm thick at x = 0 above z = 55 (the holder's height when the tool stands on z = 0).
-  const SurfaceIndex part(box(Eigen::Vector3d(-0.1, -50, 55), Eigen::Vector3d(0.1, 50, 120)));
+  const SurfaceIndex part(test::box_mesh(Eigen::Vector3d(-0.1, -50, 55), Eigen::Vector3d(0.1, 50, 120)));
   const std::vector<ToolPose> poses = {{Eigen::Vector3d(-40, 0, 0), Eigen::Vector3d::UnitZ()},
                                        {Eigen::Vector3d(40, 0, 0), Eigen::Vector3d::UnitZ()}};
   // Each pose alone is clear.
@@ -197,7 +190,7 @@ TEST_CASE("the cutter is flat-ended: standing on a floor is no gouge, sinking in
 TEST_CASE("a 50 m pass over a thin wall finds the wall, skips far positions, reports progress and stays within the bounds") {
   // A wall 0.6 mm thick (thinner than the clearance) 200 mm high at x = 25 m; the tool (92 mm
   // long) moves 50 m along x with its axis vertical, the tip 2 mm above the wall's foot.
-  TriMesh part = box({25000, -100, -5}, {25000.6, 100, 195});
+  TriMesh part = test::box_mesh({25000, -100, -5}, {25000.6, 100, 195});
   const SurfaceIndex index(part);
   const ToolAssembly t = assembly();
   const std::vector<ToolPose> poses = {{Eigen::Vector3d(0, 0, 2), Eigen::Vector3d::UnitZ()},
@@ -227,7 +220,7 @@ TEST_CASE("a 50 m pass over a thin wall finds the wall, skips far positions, rep
   CHECK(seen.back() == 1.0);
 
   // Without the wall nothing is reported; with a tighter bound the check refuses before working.
-  CHECK(check_collisions(SurfaceIndex(box({0, 500, -5}, {50000, 501, 195})), poses, t, CollisionOptions{}).clear());
+  CHECK(check_collisions(SurfaceIndex(test::box_mesh({0, 500, -5}, {50000, 501, 195})), poses, t, CollisionOptions{}).clear());
   CollisionOptions small;
   small.max_positions = 50000;
   CHECK_THROWS_WITH_AS((void)check_collisions(index, poses, t, small),
@@ -242,7 +235,7 @@ TEST_CASE("a 50 m pass over a thin wall finds the wall, skips far positions, rep
 TEST_CASE("a motion given as two poses or as a pose every half clearance reports the same collisions") {
   // The same positions, once interpolated (the bisection skips across the steps between the two
   // poses) and once as input poses (it skips across poses): the same walls, depths and points.
-  TriMesh part = box({50, -100, -5}, {50.6, 100, 195});
+  TriMesh part = test::box_mesh({50, -100, -5}, {50.6, 100, 195});
   const SurfaceIndex index(part);
   const ToolAssembly t = assembly();
   const std::vector<ToolPose> one = {{Eigen::Vector3d(0, 0, 2), Eigen::Vector3d::UnitZ()},
