@@ -720,7 +720,35 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
             ++out.seeds_tried;
             if (h.ok && (!f.ok || h.gain > f.gain)) f = std::move(h);
           }
+        // With a part: a motion trimmed where its tool would enter the part keeps one clear stretch;
+        // the sweep's stretches before and after it are fitted on their own (a shorter motion turns
+        // less, and its tool can stand otherwise there).
+        std::vector<LineTrajectory> rest;
+        if (o.split_trimmed && f.ok && o.patch.fit.check.part && f.fit.check_trim && f.fit.trajectory) {
+          const LineTrajectory& ft = *f.fit.trajectory;
+          const size_t n = ft.a.size(), min_poses = size_t(2 * o.patch.fit.rail_control_points);
+          const auto piece = [&](size_t from, size_t to) {
+            LineTrajectory p;
+            p.a.assign(ft.a.begin() + long(from), ft.a.begin() + long(to));
+            p.b.assign(ft.b.begin() + long(from), ft.b.begin() + long(to));
+            p.F.assign(ft.F.begin() + long(from), ft.F.begin() + long(to));
+            return p;
+          };
+          // The kept stretch's poses by the rails' parameter (chord length of the line midpoints).
+          Eigen::MatrixXd mids(Eigen::Index(n), 3);
+          for (size_t k = 0; k < n; ++k) mids.row(Eigen::Index(k)) = (0.5 * (ft.a[k] + ft.b[k])).transpose();
+          const std::vector<double> ts = chord_length_parameters(mids);
+          const size_t i0 = size_t(std::lower_bound(ts.begin(), ts.end(), f.fit.t_from) - ts.begin());
+          const size_t i1 = size_t(std::upper_bound(ts.begin(), ts.end(), f.fit.t_to) - ts.begin());  // first pose beyond
+          if (i0 >= min_poses) rest.push_back(piece(0, i0));
+          if (n > i1 && n - i1 >= min_poses) rest.push_back(piece(i1, n));
+        }
         offer(std::move(f));
+        for (size_t k = 0; k < rest.size(); ++k) {
+          report("fitting candidate " + std::to_string(r + 1) + ", beyond its trim " + std::to_string(k + 1));
+          offer(fit_candidate(surface, rest[k], covered, area, o));
+          ++out.seeds_tried;
+        }
       }
     };
     fit_best(candidates_of(false), o.fitted_seeds);
