@@ -308,7 +308,7 @@ TEST_CASE("tool shared: two separate flanks of one barrel tool are covered by on
     CHECK(std::find(stages.begin(), stages.end(), "refitting all patches jointly with one tool") != stages.end());
 }
 
-TEST_CASE("with a part: a post standing in front of a flank splits the cover; both sides are cut and no tool enters the post" * doctest::test_suite("heavy")) {
+TEST_CASE("with a part: a post standing in front of a flank splits the cover, both sides are cut and no tool enters the post" * doctest::test_suite("heavy")) {
   // The flank x = 0 (y 0..60, z 0..20 mm, normals +x) and a post in front of its middle (y 28..32).
   // A sweep along the whole flank runs into the post and is trimmed to one side of it; the other side
   // needs a patch of its own (the sweep beyond the post is fitted as a candidate too,
