@@ -403,6 +403,15 @@ std::vector<int> seed_points(const SurfaceIndex& surface, const std::vector<char
   return out;
 }
 
+// Positions [from, to) of a trajectory (F_l with them; the stop reasons are not carried over).
+LineTrajectory slice(const LineTrajectory& tr, size_t from, size_t to) {
+  LineTrajectory p;
+  p.a.assign(tr.a.begin() + long(from), tr.a.begin() + long(to));
+  p.b.assign(tr.b.begin() + long(from), tr.b.begin() + long(to));
+  p.F.assign(tr.F.begin() + long(from), tr.F.begin() + long(to));
+  return p;
+}
+
 struct Candidate {
   LineTrajectory trajectory;
   double uncovered_swept = 0;  // share of Φ's area, uncovered, under the kept trajectory
@@ -445,11 +454,9 @@ Candidate keep_uncovered(const SurfaceIndex& surface, const LineTrajectory& tr, 
   for (double run = 0; lo > 0 && run < o.band; --lo) run += (mid(lo) - mid(lo - 1)).norm();
   for (double run = 0; hi + 1 < n && run < o.band; ++hi) run += (mid(hi + 1) - mid(hi)).norm();
   Candidate c;
+  c.trajectory = slice(tr, size_t(lo), size_t(hi + 1));
   c.trajectory.stop_backward = tr.stop_backward;
   c.trajectory.stop_forward = tr.stop_forward;
-  c.trajectory.a.assign(tr.a.begin() + lo, tr.a.begin() + hi + 1);
-  c.trajectory.b.assign(tr.b.begin() + lo, tr.b.begin() + hi + 1);
-  c.trajectory.F.assign(tr.F.begin() + lo, tr.F.begin() + hi + 1);
   std::vector<char> swept(m.vertices.size(), 0);
   for (int i = lo; i <= hi; ++i)
     for (int j = 0; j < per_line; ++j) {
@@ -709,12 +716,9 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         const size_t half = tr.a.size() / 2;
         if ((!f.ok || f.gain < 0.02) && half >= size_t(2 * o.patch.fit.rail_control_points))
           for (int piece = 0; piece < 2; ++piece) {
-            LineTrajectory part;
             const size_t from = piece == 0 ? 0 : half, to = piece == 0 ? half + half / 10 : tr.a.size();
             const size_t lo = piece == 0 ? from : from - half / 10;  // a small overlap between the halves
-            part.a.assign(tr.a.begin() + long(lo), tr.a.begin() + long(to));
-            part.b.assign(tr.b.begin() + long(lo), tr.b.begin() + long(to));
-            part.F.assign(tr.F.begin() + long(lo), tr.F.begin() + long(to));
+            const LineTrajectory part = slice(tr, lo, to);
             report("fitting candidate " + std::to_string(r + 1) + ", half " + std::to_string(piece + 1));
             Fitted h = fit_candidate(surface, part, covered, area, o);
             ++out.seeds_tried;
@@ -724,24 +728,15 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         // the sweep's stretches before and after it are fitted on their own (a shorter motion turns
         // less, and its tool can stand otherwise there).
         std::vector<LineTrajectory> rest;
-        if (o.split_trimmed && f.ok && o.patch.fit.check.part && f.fit.check_trim && f.fit.trajectory) {
+        if (f.ok && o.patch.fit.check.part && f.fit.check_trim && f.fit.trajectory) {
           const LineTrajectory& ft = *f.fit.trajectory;
           const size_t n = ft.a.size(), min_poses = size_t(2 * o.patch.fit.rail_control_points);
-          const auto piece = [&](size_t from, size_t to) {
-            LineTrajectory p;
-            p.a.assign(ft.a.begin() + long(from), ft.a.begin() + long(to));
-            p.b.assign(ft.b.begin() + long(from), ft.b.begin() + long(to));
-            p.F.assign(ft.F.begin() + long(from), ft.F.begin() + long(to));
-            return p;
-          };
-          // The kept stretch's poses by the rails' parameter (chord length of the line midpoints).
-          Eigen::MatrixXd mids(Eigen::Index(n), 3);
-          for (size_t k = 0; k < n; ++k) mids.row(Eigen::Index(k)) = (0.5 * (ft.a[k] + ft.b[k])).transpose();
-          const std::vector<double> ts = chord_length_parameters(mids);
+          // The kept stretch's positions by the rails' parameter.
+          const std::vector<double> ts = trajectory_parameters(ft);
           const size_t i0 = size_t(std::lower_bound(ts.begin(), ts.end(), f.fit.t_from) - ts.begin());
-          const size_t i1 = size_t(std::upper_bound(ts.begin(), ts.end(), f.fit.t_to) - ts.begin());  // first pose beyond
-          if (i0 >= min_poses) rest.push_back(piece(0, i0));
-          if (n > i1 && n - i1 >= min_poses) rest.push_back(piece(i1, n));
+          const size_t i1 = size_t(std::upper_bound(ts.begin(), ts.end(), f.fit.t_to) - ts.begin());  // first beyond
+          if (i0 >= min_poses) rest.push_back(slice(ft, 0, i0));
+          if (n > i1 && n - i1 >= min_poses) rest.push_back(slice(ft, i1, n));
         }
         offer(std::move(f));
         for (size_t k = 0; k < rest.size(); ++k) {

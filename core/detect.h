@@ -38,9 +38,6 @@ struct CoverOptions {
   int fitted_seeds = 3;    // of those, this many are fitted (in turn, among those sweeping the most uncovered area)
   double band = 0.03;      // overlap into covered area a new patch's trajectory keeps (unit frame, arc length)
   int lines = 8;           // axis lines written per patch (init: lines) to reproduce it
-  // With a check surface: a candidate trimmed where its tool enters the part has the sweep before and
-  // after its kept stretch fitted as candidates of their own.
-  bool split_trimmed = true;
   // Candidates fitted in a round but not chosen are kept (at most this many, by their gain on the
   // uncovered area): the next round starts from the best of them (a flank of its own, seeded and
   // fitted while another won, is not searched for again).
@@ -93,7 +90,9 @@ struct Detection {
   bool joint_refit = false;
 };
 
-// `patches: auto` of a job: one call. Throws InputError for invalid options; a surface on which no
+// `patches: auto` of a job: one call. With a check surface (patch.fit.check), a candidate trimmed
+// where its tool enters the part has the sweep before and after its kept stretch fitted as candidates
+// of their own. Throws InputError for invalid options; a surface on which no
 // line is movable gives an empty Detection with stop NoProgress.
 [[nodiscard]] Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& options,
                                        const std::function<void(const CoverProgress&)>& on_progress = {});

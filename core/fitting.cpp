@@ -188,13 +188,17 @@ Rails rails_from_lines(const std::vector<AxisLine>& lines, int rail, double leng
   return {fit_rail(A, ts, o.rail_control_points), fit_rail(B, ts, o.rail_control_points), L};
 }
 
+std::vector<double> trajectory_parameters(const LineTrajectory& tr) {
+  Eigen::MatrixXd mids(Eigen::Index(tr.a.size()), 3);
+  for (size_t k = 0; k < tr.a.size(); ++k) mids.row(Eigen::Index(k)) = (0.5 * (tr.a[k] + tr.b[k])).transpose();
+  return chord_length_parameters(mids);
+}
+
 Rails rails_from_trajectory(const LineTrajectory& tr, const FitOptions& o) {
   if (tr.a.size() < size_t(o.rail_control_points))
     throw InputError("line propagation produced only " + std::to_string(tr.a.size()) +
                      " positions: the line is not movable along the surface (try another line)");
-  Eigen::MatrixXd mids(Eigen::Index(tr.a.size()), 3);
-  for (size_t k = 0; k < tr.a.size(); ++k) mids.row(Eigen::Index(k)) = (0.5 * (tr.a[k] + tr.b[k])).transpose();
-  const std::vector<double> ts = chord_length_parameters(mids);
+  const std::vector<double> ts = trajectory_parameters(tr);
   return {fit_rail(tr.a, ts, o.rail_control_points), fit_rail(tr.b, ts, o.rail_control_points),
           (tr.b[0] - tr.a[0]).norm()};
 }

@@ -182,6 +182,9 @@ struct AxisLine {
                                      const FitOptions& options);
 // Line-driven: the rails through the positions of a propagated line (Sec. 4.3).
 [[nodiscard]] Rails rails_from_trajectory(const LineTrajectory& trajectory, const FitOptions& options);
+// The rails' parameter t of each position of a trajectory: chord length of the line midpoints (what
+// rails_from_trajectory fits the rails over).
+[[nodiscard]] std::vector<double> trajectory_parameters(const LineTrajectory& trajectory);
 
 
 struct ErrorStats {

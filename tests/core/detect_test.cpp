@@ -311,40 +311,38 @@ TEST_CASE("tool shared: two separate flanks of one barrel tool are covered by on
 TEST_CASE("with a part: a post standing in front of a flank splits the cover, both sides are cut and no tool enters the post" * doctest::test_suite("heavy")) {
   // The flank x = 0 (y 0..60, z 0..20 mm, normals +x) and a post in front of its middle (y 28..32).
   // A sweep along the whole flank runs into the post and is trimmed to one side of it; the other side
-  // needs a patch of its own (the sweep beyond the post is fitted as a candidate too,
-  // CoverOptions::split_trimmed; without it the next round's seeds find it: 3 patches, 95.1% either
-  // way here). Whatever the tool, a band around the post is out of reach.
+  // needs a patch of its own (the sweep beyond the post is fitted as a candidate too; without that
+  // the next round's seeds find it: 3 patches, 95.1% either way here). Whatever the tool, a band
+  // around the post is out of reach.
   const TriMesh phi_mm = test::grid_mesh(61, 21, [](int j, int k) { return Eigen::Vector3d(0, 1.0 * j, 1.0 * k); });
   const Similarity fr = unit_diagonal_frame(phi_mm);
   const SurfaceIndex phi(transformed(phi_mm, fr));
   const SurfaceIndex post(transformed(test::box_mesh({1, 28, -10}, {30, 32, 100}, 4), fr));
-  {
-    CoverOptions o;
-    o.patch.tolerance = fr.length_to_unit(0.01);
-    o.patch.fit.shape = ToolShape::Cylinder;
-    o.patch.fit.check.part = &post;
-    o.patch.fit.check.tolerance = fr.length_to_unit(0.005);
-    o.patch.orient_by_part = true;
-    o.patch.refit_with_check = false;
-    const Detection d = detect_patches(phi, o);
-    double low = 0, high = 0, low_all = 0, high_all = 0;
-    std::vector<double> area(phi_mm.vertices.size(), 0.0);
-    for (int f = 0; f < int(phi_mm.faces.size()); ++f)
-      for (int v : phi_mm.faces[size_t(f)]) area[size_t(v)] += face_area(phi_mm, f) / 3;
-    for (size_t v = 0; v < area.size(); ++v) {
-      const double y = phi_mm.vertices[v].y();
-      const bool cut = std::isfinite(d.deviation[v]) && std::abs(d.deviation[v]) <= o.patch.tolerance;
-      if (y < 20) low_all += area[v], low += cut ? area[v] : 0;
-      if (y > 40) high_all += area[v], high += cut ? area[v] : 0;
-    }
-    MESSAGE(d.patches.size(), " patches, coverage ", d.coverage, ", y < 20: ", low / low_all,
-            ", y > 40: ", high / high_all, ", trajectories fitted ", d.seeds_tried);
-    for (const DetectedPatch& p : d.patches) {
-      CHECK(!p.fit.check_refused);
-      CHECK(p.fit.check_intrusion <= 0);
-    }
-    CHECK(d.patches.size() >= 2);
-    CHECK(low / low_all >= 0.9);
-    CHECK(high / high_all >= 0.9);
+  CoverOptions o;
+  o.patch.tolerance = fr.length_to_unit(0.01);
+  o.patch.fit.shape = ToolShape::Cylinder;
+  o.patch.fit.check.part = &post;
+  o.patch.fit.check.tolerance = fr.length_to_unit(0.005);
+  o.patch.orient_by_part = true;
+  o.patch.refit_with_check = false;
+  const Detection d = detect_patches(phi, o);
+  double low = 0, high = 0, low_all = 0, high_all = 0;
+  std::vector<double> area(phi_mm.vertices.size(), 0.0);
+  for (int f = 0; f < int(phi_mm.faces.size()); ++f)
+    for (int v : phi_mm.faces[size_t(f)]) area[size_t(v)] += face_area(phi_mm, f) / 3;
+  for (size_t v = 0; v < area.size(); ++v) {
+    const double y = phi_mm.vertices[v].y();
+    const bool cut = std::isfinite(d.deviation[v]) && std::abs(d.deviation[v]) <= o.patch.tolerance;
+    if (y < 20) low_all += area[v], low += cut ? area[v] : 0;
+    if (y > 40) high_all += area[v], high += cut ? area[v] : 0;
   }
+  MESSAGE(d.patches.size(), " patches, coverage ", d.coverage, ", y < 20: ", low / low_all,
+          ", y > 40: ", high / high_all, ", trajectories fitted ", d.seeds_tried);
+  for (const DetectedPatch& p : d.patches) {
+    CHECK(!p.fit.check_refused);
+    CHECK(p.fit.check_intrusion <= 0);
+  }
+  CHECK(d.patches.size() >= 2);
+  CHECK(low / low_all >= 0.9);
+  CHECK(high / high_all >= 0.9);
 }
