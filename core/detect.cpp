@@ -412,6 +412,104 @@ LineTrajectory slice(const LineTrajectory& tr, size_t from, size_t to) {
   return p;
 }
 
+// The trajectory's position nearest to where its line was seeded (a end).
+int seed_position(const LineTrajectory& tr, const Eigen::Vector3d& seed_a) {
+  int start = 0;
+  double best = std::numeric_limits<double>::infinity();
+  for (size_t i = 0; i < tr.a.size(); ++i)
+    if ((tr.a[i] - seed_a).norm() < best) best = (tr.a[i] - seed_a).norm(), start = int(i);
+  return start;
+}
+
+// A propagated line as the tool it starts: at most `max_length` long (custom tools), and with a part
+// slid along its axis out of it. A seed line reaches across Φ, which may be wider than any allowed tool
+// (the HECC impeller's inlet: 67 mm, tools up to 50 mm), and a line of constant length propagated
+// over a flank whose width shrinks (the impeller's outlet: 17 mm) hangs far beyond it, into the hub;
+// the fit would shorten it at an arbitrary end and the part trim away most of its motion. So per
+// position, from the stretch of the axis over Φ [f0, f1] and the stretch where a sphere of the
+// local tool radius (the distance to Φ) keeps out of the part [c0, c1], two placements of one
+// length w = min(L, max_length): the tip end low (at f0, or lifted to c0 less a radius, where a flat
+// end stands on the hub) and the tip end high (its far end at f1, or lowered to c1). They are
+// candidates of their own (the tier at the hub and the one above it); one when they agree. A line no
+// longer than max_length is only slid as far as the part needs (not at all without a part). Fixed
+// tools keep theirs (held_tool_start centres the tool's own length on the line).
+std::vector<LineTrajectory> placed_lines(const SurfaceIndex& surface, const LineTrajectory& tr, const CoverOptions& o) {
+  const CheckSurface& check = o.patch.fit.check;
+  if (tr.a.empty() || o.patch.fit.fixed_tool) return {tr};
+  const double L = (tr.b.front() - tr.a.front()).norm();
+  const double w = std::min(L, o.patch.fit.constraints.max_length);
+  if (!check.part && w >= L) return {tr};
+  const size_t n = tr.a.size();
+  // Samples along the axis, from w below its a end to w beyond its b end.
+  const int per = 48;
+  const double h = w / per;
+  const int count = int(std::ceil((L + 2 * w) / h)) + 1;
+  std::vector<Eigen::Vector3d> x(n * size_t(count));
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d e = (tr.b[i] - tr.a[i]).normalized();
+    for (int k = 0; k < count; ++k) x[i * size_t(count) + size_t(k)] = tr.a[i] + (-w + k * h) * e;
+  }
+  const std::vector<Footpoint> f = surface.closest(x);
+  const std::vector<double> part = cutter_clearances(check, x);
+  constexpr double nan = std::numeric_limits<double>::quiet_NaN();
+  std::vector<double> low(n, nan), high(n, nan);
+  const double overhang = 0.01 * L;
+  for (size_t i = 0; i < n; ++i) {
+    const auto at = [&](int k) { return i * size_t(count) + size_t(k); };
+    int k0 = -1, k1 = -1;  // the axis over Φ
+    for (int k = 0; k < count; ++k)
+      if (!f[at(k)].on_boundary) k1 = k, k0 = k0 < 0 ? k : k0;
+    if (k0 < 0) continue;
+    const auto u = [&](int k) { return -w + k * h; };
+    // The tool radius along the axis: the distance to Φ over it, the nearest such beyond it.
+    const auto radius = [&](int k) { return f[at(std::clamp(k, k0, k1))].distance; };
+    const auto clear = [&](int k) { return part[at(k)] >= radius(k) - check.tolerance; };
+    // The clear stretch around the middle of the axis over Φ (none there: the part says nothing here).
+    const int mid = (k0 + k1) / 2;
+    int c0 = 0, c1 = count - 1;
+    if (clear(mid)) {
+      c0 = c1 = mid;
+      while (c0 > 0 && clear(c0 - 1)) --c0;
+      while (c1 + 1 < count && clear(c1 + 1)) ++c1;
+    }
+    // Where the tip may stand: not below the part's side at the tip, not so high that the far end
+    // enters the part (both: the tip's side wins, the trim judges the rest).
+    const double tip_min = c0 > 0 ? u(c0) - radius(c0) : -INFINITY;
+    const double tip_max = c1 + 1 < count ? u(c1) + radius(c1) - w : INFINITY;
+    if (w < L) {
+      low[i] = std::max(std::min(u(k0) - overhang, tip_max), tip_min);
+      high[i] = std::max(std::min(u(k1) + overhang - w, tip_max), tip_min);
+    } else {
+      low[i] = high[i] = std::max(std::min(0.0, tip_max), tip_min);  // slid only as far as the part needs
+    }
+  }
+  // Positions with no axis over Φ take their neighbour's placement.
+  const auto fill = [&](std::vector<double>& s) {
+    for (size_t i = 1; i < n; ++i)
+      if (std::isnan(s[i])) s[i] = s[i - 1];
+    for (size_t i = n - 1; i-- > 0;)
+      if (std::isnan(s[i])) s[i] = s[i + 1];
+    for (double& v : s)
+      if (std::isnan(v)) v = 0;
+  };
+  fill(low);
+  fill(high);
+  const auto moved = [&](const std::vector<double>& s) {
+    LineTrajectory p = tr;
+    for (size_t i = 0; i < n; ++i) {
+      const Eigen::Vector3d e = (tr.b[i] - tr.a[i]).normalized();
+      p.a[i] = tr.a[i] + s[i] * e;
+      p.b[i] = p.a[i] + w * e;
+    }
+    return p;
+  };
+  double apart = 0, slid = 0;
+  for (size_t i = 0; i < n; ++i) apart = std::max(apart, std::abs(low[i] - high[i])), slid = std::max(slid, std::abs(low[i]));
+  if (w >= L && slid == 0) return {tr};
+  if (apart < 0.02 * w) return {moved(low)};
+  return {moved(low), moved(high)};
+}
+
 struct Candidate {
   LineTrajectory trajectory;
   double uncovered_swept = 0;  // share of Φ's area, uncovered, under the kept trajectory
@@ -420,7 +518,7 @@ struct Candidate {
 
 // Keeps the run of the trajectory that sweeps uncovered surface around the seed position, plus
 // `band` of arc length into covered surface on each side (the overlap with the neighbours).
-Candidate keep_uncovered(const SurfaceIndex& surface, const LineTrajectory& tr, const Eigen::Vector3d& seed_a,
+Candidate keep_uncovered(const SurfaceIndex& surface, const LineTrajectory& tr, int start,
                          const std::vector<char>& covered, const std::vector<double>& area, const CoverOptions& o) {
   const TriMesh& m = surface.mesh();
   const int n = int(tr.a.size());
@@ -443,10 +541,6 @@ Candidate keep_uncovered(const SurfaceIndex& surface, const LineTrajectory& tr, 
     }
     pos_covered[size_t(i)] = inside == 0 || cov * 5 >= inside * 4;
   }
-  int start = 0;
-  double best = std::numeric_limits<double>::infinity();
-  for (int i = 0; i < n; ++i)
-    if ((tr.a[size_t(i)] - seed_a).norm() < best) best = (tr.a[size_t(i)] - seed_a).norm(), start = i;
   int lo = start, hi = start;
   while (lo > 0 && !pos_covered[size_t(lo - 1)]) --lo;
   while (hi + 1 < n && !pos_covered[size_t(hi + 1)]) ++hi;
@@ -687,15 +781,18 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         // Refined lines are explored too: the refinement does not look at F_l, exploration does.
         const ExploredLine ex = explore_line(surface, s.line.a, s.line.b, o.patch.exploration);
         const LineTrajectory tr = propagate_line(surface, ex.a, ex.b, o.patch.propagation);
-        Candidate c = keep_uncovered(surface, tr, ex.a, covered, area, o);
-        c.seed_vertex = s.vertex;
-        // A seed is used up when its candidate is fitted or cannot be; one explored but not fitted
-        // (others swept more uncovered area, on another flank perhaps) is seeded again next round.
-        if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) {
-          tried[size_t(s.vertex)] = 1;
-          continue;
+        const int start = seed_position(tr, ex.a);
+        for (const LineTrajectory& placed : placed_lines(surface, tr, o)) {
+          Candidate c = keep_uncovered(surface, placed, start, covered, area, o);
+          c.seed_vertex = s.vertex;
+          // A seed is used up when its candidate is fitted or cannot be; one explored but not fitted
+          // (others swept more uncovered area, on another flank perhaps) is seeded again next round.
+          if (c.trajectory.a.size() < size_t(o.patch.fit.rail_control_points)) {
+            tried[size_t(s.vertex)] = 1;
+            continue;
+          }
+          candidates.push_back(std::move(c));
         }
-        candidates.push_back(std::move(c));
       }
       // The candidates sweeping the most uncovered area first.
       std::stable_sort(candidates.begin(), candidates.end(),

@@ -751,6 +751,17 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
 }
 }  // namespace
 
+std::vector<double> cutter_clearances(const CheckSurface& c, const std::vector<Eigen::Vector3d>& points) {
+  std::vector<double> out(points.size(), INFINITY);
+  if (!c.part || points.empty()) return out;
+  const std::vector<Footpoint> fps = c.part->closest(points);
+  std::vector<Footpoint> whole;
+  if (c.solid) whole = c.solid->closest(points);
+  for (size_t k = 0; k < points.size(); ++k)
+    out[k] = check_distance(c, points[k], fps[k], c.solid ? &whole[k] : nullptr).distance;
+  return out;
+}
+
 CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const CheckSurface& c, int rows, int samples_s,
                            bool enclose) {
   CheckProfile out;

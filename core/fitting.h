@@ -161,6 +161,11 @@ struct CheckProfile {
 [[nodiscard]] CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const CheckSurface& check,
                                          int rows, int samples_s, bool enclose = false);
 
+// Signed distances of points to the check surface as the cutter's samples are judged (the part
+// without Φ's twin; inside, negative, decided by the whole part when `solid` is given); infinite
+// without a part. A sphere of radius R at a point keeps out of the part when its distance >= R - tolerance.
+[[nodiscard]] std::vector<double> cutter_clearances(const CheckSurface& check, const std::vector<Eigen::Vector3d>& points);
+
 // Which way the holder should stand for a motion against a check surface: the end of the axis
 // whose shank and holder (check.body) enter the part in fewer rows (then by less), as a direction
 // for CheckSurface::up (± mean_axis(rails)); `fallback` decides a tie (no part, no body, both clear

@@ -346,3 +346,49 @@ TEST_CASE("with a part: a post standing in front of a flank splits the cover, bo
   CHECK(low / low_all >= 0.9);
   CHECK(high / high_all >= 0.9);
 }
+
+TEST_CASE("with a part: a flank taller than the longest tool is cut in two tiers, the lower one standing on the floor" * doctest::test_suite("heavy")) {
+  // The flank x = 0.01 (y - 30)^2 (y 0..60, z 0..60 mm; a cylinder moving along it with its axis
+  // along z envelopes it exactly) standing on a floor z <= 0, tools at most 40 mm long. A seed line
+  // reaches across the whole 60 mm; as the tool it starts it is placed twice, its tip on the floor
+  // and its far end at the top edge, each tier a candidate of its own. Without the placement the fit
+  // shortens each line at an arbitrary end: 3 patches, 67.1%, stopped without progress (`flankcam
+  // fit` of this job; 2 patches, 97.5% with it).
+  const TriMesh phi_mm = test::grid_mesh(41, 41, [](int j, int k) {
+    const double y = 1.5 * j;
+    return Eigen::Vector3d(0.01 * (y - 30) * (y - 30), y, 1.5 * k);
+  });
+  const Similarity fr = unit_diagonal_frame(phi_mm);
+  const SurfaceIndex phi(transformed(phi_mm, fr));
+  const SurfaceIndex floor(transformed(test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4), fr));
+  CoverOptions o;
+  o.patch.tolerance = fr.length_to_unit(0.02);
+  o.patch.fit.shape = ToolShape::Cylinder;
+  o.patch.fit.constraints.max_length = fr.length_to_unit(40);
+  o.patch.fit.check.part = &floor;
+  o.patch.fit.check.tolerance = fr.length_to_unit(0.005);
+  o.patch.orient_by_part = true;
+  o.patch.refit_with_check = false;
+  const Detection d = detect_patches(phi, o);
+  double low = 0, high = 0, low_all = 0, high_all = 0;
+  std::vector<double> area(phi_mm.vertices.size(), 0.0);
+  for (int f = 0; f < int(phi_mm.faces.size()); ++f)
+    for (int v : phi_mm.faces[size_t(f)]) area[size_t(v)] += face_area(phi_mm, f) / 3;
+  for (size_t v = 0; v < area.size(); ++v) {
+    const double z = phi_mm.vertices[v].z();
+    const bool cut = std::isfinite(d.deviation[v]) && std::abs(d.deviation[v]) <= o.patch.tolerance;
+    if (z < 15) low_all += area[v], low += cut ? area[v] : 0;
+    if (z > 45) high_all += area[v], high += cut ? area[v] : 0;
+  }
+  MESSAGE(d.patches.size(), " patches, coverage ", d.coverage, ", z < 15: ", low / low_all, ", z > 45: ", high / high_all,
+          ", trajectories fitted ", d.seeds_tried);
+  for (const DetectedPatch& p : d.patches) {
+    CHECK(!p.fit.check_refused);
+    CHECK(p.fit.check_intrusion <= 0);
+    CHECK(fr.length_to_mm(p.fit.fit.rails.length) <= 40 + 1e-6);
+  }
+  CHECK(d.patches.size() >= 2);
+  CHECK(low / low_all >= 0.9);
+  CHECK(high / high_all >= 0.9);
+  CHECK(d.coverage >= 0.95);
+}
