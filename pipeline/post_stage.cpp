@@ -95,7 +95,7 @@ std::vector<PostedProgram> post_programs(const Machine& m, const std::vector<Pos
     }
   }
   for (const PostedProgram& p : out)
-    if (!p.posted.refused.empty()) throw ProgramRefused("back-simulation: " + p.posted.refused + "; nothing written");
+    if (!p.posted.refused.empty()) throw ProgramRefused(p.posted.refused + "; nothing written");
   return out;
 }
 

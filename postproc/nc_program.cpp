@@ -130,75 +130,131 @@ bool axial(const ToolPose& p, const ToolPose& q) {
   return d.norm() > 1e-9 && p.axis.cross(q.axis).norm() < 1e-9 && p.axis.cross(d).norm() <= 1e-6 * d.norm();
 }
 
-// The lead point off pose p, where the rapid along the tool axis from above ends and the lead-in
-// begins (the lead-out ends and the retract along the axis begins): `lead` along lead_direction, or,
-// when the lead would cut the part or the assembly (its cutter grown by the clearance) would meet the
-// part on its way along the axis from beyond the part's reach down to that point, the other offsets of
-// lead_offsets (turned about the axis by 20-90 degrees either way, lifted along it by half and a whole
-// lead: a hub sloping under the tool's end), then all twice as far out: the first clear candidate.
-// A flank in a narrow passage (HECC impeller: the plain lead point's rapid ran the cutter 1.7 mm into
-// the part) is entered from the side that is open. None clear: the plain point (the
-// back-simulation then says what it hits).
-// `box`: the part's bounding box.
-Eigen::Vector3d lead_point(const SurfaceIndex& part, const Eigen::AlignedBox3d& box, const ToolPose& p,
-                           const ToolAssembly& a, double lead, double clearance) {
-  const Eigen::Vector3d axis = p.axis.normalized(), n = lead_direction(part, p, a.cutter_length());
-  const double beyond = (box.center() - p.tip).norm() + 0.5 * box.diagonal().norm() + clearance;
-  // The cutter grown by the clearance on its side and below its tip (the grown tip stands that far
-  // under q: a floor under the tool's end counts too).
-  ToolAssembly grown = a;
-  for (Eigen::Vector2d& c : grown.cutter) c += Eigen::Vector2d(clearance, clearance);
-  if (clearance > 0) grown.cutter.insert(grown.cutter.begin(), Eigen::Vector2d(0, grown.cutter.front().y()));
-  CollisionOptions co;
-  co.clearance_mm = clearance;
-  co.gouge_tolerance_mm = 1e-6;
-  CollisionOptions lead_co = co;
-  lead_co.gouge_tolerance_mm = 0.1;
-  const std::vector<Eigen::Vector3d> offsets = lead_offsets(n, axis);
-  for (const double f : {1.0, 2.0})
-    for (const Eigen::Vector3d& offset : offsets) {
-      const Eigen::Vector3d q = p.tip + f * lead * offset;
-      try {
-        // The lead itself, from a tenth of the way out (the pose touches the flank), must not cut the
-        // part (0.1 mm: a coarse twin of the flank stands proud of it by its sag); then the rapid above.
-        if (check_collisions(part, {{p.tip + 0.1 * (q - p.tip), axis}, {q, axis}}, a, lead_co).clear() &&
-            check_collisions(part, {{q + beyond * axis, axis}, {q - clearance * axis, axis}}, grown, co).clear())
-          return q;
-      } catch (const InputError&) {
-        return p.tip + lead * n;  // beyond the check's bounds: the plain point, judged by the back-simulation
-      }
-    }
-  return p.tip + lead * n;
+// How the back-simulation judges a program posted with `o` (post() checks the emitted text with these
+// options); the link planner judges its lead candidates with the same, so that the two agree.
+VerifyOptions back_simulation_options(const PostOptions& o) {
+  VerifyOptions vo;
+  vo.gouge_tolerance_mm = o.gouge_tolerance_mm;
+  // Rapids keep the clearance the links were planned with (not merely off the part: the links of a
+  // 0.5 mm clearance job came 0.483 mm close); one that does not is planned again farther out.
+  vo.link_clearance_mm = o.clearance_mm;
+  if (o.cut_part && o.design)
+    vo.cut_part = o.cut_part, vo.design_gouge_tolerance_mm = o.design_gouge_tolerance_mm, vo.design_within_mm = o.design_within_mm;
+  return vo;
 }
+
+// The back-simulation as the link planner asks it about one section's leads.
+struct LinkJudge {
+  const SurfaceIndex& part;
+  const SurfaceIndex* design;  // Φ when the cut is judged apart (VerifyOptions::cut_part), else null
+  VerifyTool tool;
+  VerifyOptions options;
+  Eigen::Vector3d centre;      // of the part's bounding box
+  double reach;                // the part's bounding radius plus the assembly's largest radius
+};
+
+// A lead's length and the clearance its links keep (mm).
+struct LeadDistances {
+  double lead_mm, clearance_mm;
+};
+
+// Whether the back-simulation passes a lead between the cut pose p and the lead point q: the feed
+// along the lead (the cutter within the gouge tolerance, as in the cut; shank and holder `clearance`
+// off the part), q as the end of the rapid along the axis, and that rapid out to where the assembly
+// is `clearance` beyond the part's bounding ball. The same sweep as the program's back-simulation
+// (verify_cl: the tip on a line, the axis held, as the machine moves a lead and the rapid along the
+// axis above it): the plan once judged the cutter grown by the clearance with the collision check,
+// whose per-slab nearest point missed a blade edge beside the cutter's end that a floor under the tip
+// hid (HECC impeller auto-7: 0.121 mm at clearance 0.5 in the back-simulation, then a retry).
+bool lead_clear(const LinkJudge& j, const ToolPose& p, const Eigen::Vector3d& q, double clearance) {
+  const Eigen::Vector3d axis = p.axis.normalized();
+  const double beyond = (q - j.centre).norm() + j.reach + clearance;
+  ClProgram cl;
+  cl.moves = {{{p.tip, axis}, false, 1}, {{q, axis}, false, 1}, {{q, axis}, true, 0}, {{q + beyond * axis, axis}, true, 0}};
+  VerifyOptions vo = j.options;
+  vo.link_clearance_mm = clearance;
+  const VerifyReport rep = verify_cl(cl, j.part, j.tool, vo, j.design);
+  // Block 0 is the cut pose itself, judged with the cut.
+  if (std::any_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.block > 0; })) return false;
+  const auto& lead = rep.blocks.at(1).min_clearance_mm;
+  return lead[size_t(Component::Shank)] >= clearance && lead[size_t(Component::Holder)] >= clearance;
+}
+
+// The lead point off pose p, where the rapid along the tool axis from above ends and the lead-in
+// begins (the lead-out ends and the retract along the axis begins). Per entry of `levels` in order
+// (a retry's doubled distances, then the configured ones), the offsets of lead_offsets: along
+// lead_direction, turned about the axis by 20-90 degrees either way, lifted along it by half and a
+// whole lead (a hub sloping under the tool's end), then all twice as far out; the first that
+// lead_clear passes. A flank in a narrow passage (HECC impeller: the plain lead point's rapid ran
+// the cutter 1.7 mm into the part) is entered from the side that is open. None: nullopt (the plain
+// point, unchecked, once let a retry's doubled lead-out run 1.9 mm into the impeller's next blade).
+std::optional<Eigen::Vector3d> lead_point(const LinkJudge& j, const ToolPose& p, const std::vector<LeadDistances>& levels) {
+  const Eigen::Vector3d axis = p.axis.normalized(), n = lead_direction(j.part, p, j.tool.assembly.cutter_length());
+  const std::vector<Eigen::Vector3d> offsets = lead_offsets(n, axis);
+  for (const LeadDistances& d : levels)
+    for (const double f : {1.0, 2.0})
+      for (const Eigen::Vector3d& offset : offsets) {
+        const Eigen::Vector3d q = p.tip + f * d.lead_mm * offset;
+        if (lead_clear(j, p, q, d.clearance_mm)) return q;
+      }
+  return std::nullopt;
+}
+
+struct PlannedLinks {
+  ClProgram cl;
+  std::string problem;  // the lead no candidate of lead_point is clear for; "" when planned
+};
 
 // The CL-data with its links planned against the part: its own approach (rapids before the first
 // feed move and axial lead-ins) and leave (axial lead-outs and trailing rapids) replaced by a rapid to
 // a point `lead` off the first pose along the surface normal, a feed in along the normal, the cut, and
 // a feed out along the normal. `lead` is at least the cutter's radius variation plus the clearance:
 // from there a move along the axis cannot reach the finished flank of an hourglass tool.
-ClProgram plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAssembly& a, const PostOptions& o) {
+// `o`: this try's distances; `configured`: the job's, tried when this try's leave no clear lead (a
+// retry doubles them for every section, while one section's link had hit). A lead with no clear point
+// keeps the plain one in `cl` and is named in `problem`.
+PlannedLinks plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAssembly& a, const PostOptions& o,
+                        const PostOptions& configured) {
   const size_t n = cl.moves.size();
   size_t first = 0;
   while (first < n && cl.moves[first].rapid) ++first;
-  if (first == n) return cl;
+  if (first == n) return {cl, {}};
   while (first + 1 < n && !cl.moves[first + 1].rapid && axial(cl.moves[first].pose, cl.moves[first + 1].pose)) ++first;
   size_t last = n - 1;
   while (last > first && cl.moves[last].rapid) --last;
   while (last > first && axial(cl.moves[last - 1].pose, cl.moves[last].pose)) --last;
   double rmin = INFINITY, rmax = 0;
   for (const auto& c : a.cutter) rmin = std::min(rmin, c.y()), rmax = std::max(rmax, c.y());
-  const double lead = std::max(o.lead_mm, rmax - rmin + o.clearance_mm);
-  const ClMove &p0 = cl.moves[first], &p1 = cl.moves[last];
+  std::vector<LeadDistances> levels;
+  for (const PostOptions* x : {&o, &configured}) {
+    const LeadDistances d{std::max(x->lead_mm, rmax - rmin + x->clearance_mm), x->clearance_mm};
+    if (levels.empty() || d.lead_mm != levels.back().lead_mm || d.clearance_mm != levels.back().clearance_mm) levels.push_back(d);
+  }
   Eigen::AlignedBox3d box;
   for (const Eigen::Vector3d& v : part.mesh().vertices) box.extend(v);
-  ClProgram out = cl;
-  out.moves.clear();
-  out.moves.push_back({{lead_point(part, box, p0.pose, a, lead, o.clearance_mm), p0.pose.axis}, true, 0});
-  for (size_t k = first; k <= last; ++k) out.moves.push_back(cl.moves[k]);
-  out.moves.back().rapid = false;
-  out.moves.push_back({{lead_point(part, box, p1.pose, a, lead, o.clearance_mm), p1.pose.axis}, false,
-                       p1.feed_mm_min > 0 ? p1.feed_mm_min : p0.feed_mm_min});
-  for (ClMove& mv : out.moves)
+  const bool apart = configured.cut_part && configured.design;
+  VerifyTool tool;
+  tool.number = cl.tool, tool.assembly = a;
+  const LinkJudge judge{part, apart ? configured.design : nullptr, std::move(tool), back_simulation_options(configured),
+                        box.center(), 0.5 * box.diagonal().norm() + max_radius(a)};
+  PlannedLinks out{cl, {}};
+  out.cl.moves.clear();
+  const auto lead_at = [&](const ClMove& mv, const size_t k, const char* which) -> Eigen::Vector3d {
+    if (const std::optional<Eigen::Vector3d> q = lead_point(judge, mv.pose, levels)) return *q;
+    if (out.problem.empty())
+      out.problem = fmt::format("no {} off CL move {} (tip {:.3f}, {:.3f}, {:.3f}) is clear of the part: every direction "
+                                "within 90 degrees of the surface normal, lifted by up to a lead, at lead {:g} and {:g} mm, "
+                                "clearance {:g} mm",
+                                which, k, mv.pose.tip.x(), mv.pose.tip.y(), mv.pose.tip.z(), levels.back().lead_mm,
+                                2 * levels.back().lead_mm, levels.back().clearance_mm);
+    return mv.pose.tip + levels.back().lead_mm * lead_direction(part, mv.pose, a.cutter_length());
+  };
+  const ClMove &p0 = cl.moves[first], &p1 = cl.moves[last];
+  out.cl.moves.push_back({{lead_at(p0, first, "lead-in"), p0.pose.axis}, true, 0});
+  for (size_t k = first; k <= last; ++k) out.cl.moves.push_back(cl.moves[k]);
+  out.cl.moves.back().rapid = false;
+  out.cl.moves.push_back({{lead_at(p1, last, "lead-out"), p1.pose.axis}, false, p1.feed_mm_min > 0 ? p1.feed_mm_min : p0.feed_mm_min});
+  for (ClMove& mv : out.cl.moves)
     if (!mv.rapid && !(mv.feed_mm_min > 0)) mv.feed_mm_min = p0.feed_mm_min;
   return out;
 }
@@ -238,8 +294,9 @@ double part_top_machine(const Machine& m, const SurfaceIndex& part, const std::v
 
 // `preposition`: before each tool change but the first, the rotaries and X Y are taken to the machine's
 // tool-change position at safe Z, so the change macro only moves Z (its swing happens up there).
-Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const std::string& name,
-                 const std::vector<std::string>& header, bool preposition);
+// `configured`: the caller's options, `o` this try's (distances doubled on a retry).
+Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const PostOptions& configured,
+                 const std::string& name, const std::vector<std::string>& header, bool preposition);
 
 }  // namespace
 
@@ -249,29 +306,23 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
   if (!o.part) {
     std::vector<std::string> h = header;
     h.push_back("links not checked against the part (no part given): check the program in a simulator");
-    return post_once(inputs, m, o, name, h, false);
+    return post_once(inputs, m, o, o, name, h, false);
   }
   // Plan, emit, back-simulate the text; when a motion outside the cut hits the part, plan again with
   // the distances doubled (twice at most), else refuse.
   PostOptions attempt = o;
   bool preposition = false;
   for (int tries = 0;; ++tries) {
-    Posted p = post_once(inputs, m, attempt, name, header, preposition);
+    Posted p = post_once(inputs, m, attempt, o, name, header, preposition);
+    if (!p.refused.empty()) return p;  // a lead with no clear point: no retry makes room for it
     const std::string text = nc_text(p.program, {o.dialect, o.line_numbers, o.path.tolerance_mm});
     std::vector<VerifyTool> tools;
     for (const PostInput& in : inputs)
       if (std::none_of(tools.begin(), tools.end(), [&](const VerifyTool& t) { return t.number == in.cl.tool; }))
         tools.push_back({in.cl.tool, assembly_of(in), in.tool_length_mm > 0 ? in.tool_length_mm : o.path.tool_length_mm});
-    VerifyOptions vo;
-    vo.gouge_tolerance_mm = o.gouge_tolerance_mm;
-    // Rapids keep the clearance the links were planned with (not merely off the part: the links of a
-    // 0.5 mm clearance job came 0.483 mm close); one that does not is planned again farther out.
-    vo.link_clearance_mm = o.clearance_mm;
     const bool apart = o.cut_part && o.design;
-    if (apart)
-      vo.cut_part = o.cut_part, vo.design_gouge_tolerance_mm = o.design_gouge_tolerance_mm, vo.design_within_mm = o.design_within_mm;
-    const VerifyReport rep = verify_text(text, o.dialect, name + file_extension(o.dialect), m, *o.part, tools, vo,
-                                         apart ? o.design : nullptr);
+    const VerifyReport rep = verify_text(text, o.dialect, name + file_extension(o.dialect), m, *o.part, tools,
+                                         back_simulation_options(o), apart ? o.design : nullptr);
     const bool links_clear = std::none_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.rapid; });
     if (links_clear || tries >= 2) {
       p.links_checked = true;
@@ -279,7 +330,7 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
         if (b.rapid)
           for (double c : b.min_clearance_mm) p.min_link_clearance_mm = std::min(p.min_link_clearance_mm, c);
       if (!rep.clean()) {
-        p.refused = rep.first_problem(name + file_extension(o.dialect));
+        p.refused = "back-simulation: " + rep.first_problem(name + file_extension(o.dialect));
         p.worst_line = rep.hits.front().line;
         for (const VerifyHit& h : rep.hits) p.worst_line = std::min(p.worst_line, h.line);
       }
@@ -298,8 +349,8 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
 
 namespace {
 
-Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const std::string& name,
-                 const std::vector<std::string>& header, bool preposition) {
+Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const PostOptions& configured,
+                 const std::string& name, const std::vector<std::string>& header, bool preposition) {
   if (inputs.empty()) throw InputError("post: no CL-data");
   const bool tcp = m.controller.tcp || m.controller.linuxcnc_trt;
   // LinuxCNC's trt kinematics turns two table axes; a head axis needs the controller's own TCP.
@@ -319,6 +370,7 @@ Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const P
 
   // Kinematics of every section first: the safe height depends on all of them.
   std::vector<Solved> solved;
+  std::string refused;  // the first lead the planner found no clear point for
   double top_z = -INFINITY;
   for (const PostInput& in : inputs) {
     if (in.cl.moves.empty()) throw InputError(fmt::format("patch '{}': the CL-data has no GOTO", in.patch));
@@ -328,7 +380,12 @@ Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const P
     Solved s;
     s.assembly = assembly_of(in);
     if (std::string why = s.assembly.validate(); !why.empty()) throw InputError(fmt::format("patch '{}': {}", in.patch, why));
-    s.cl = o.part ? plan_links(in.cl, *o.part, s.assembly, o) : in.cl;
+    s.cl = in.cl;
+    if (o.part) {
+      PlannedLinks planned = plan_links(in.cl, *o.part, s.assembly, o, configured);
+      s.cl = std::move(planned.cl);
+      if (!planned.problem.empty() && refused.empty()) refused = fmt::format("link planning: patch '{}': {}", in.patch, planned.problem);
+    }
     std::vector<ToolPose> poses;
     for (const ClMove& mv : s.cl.moves) poses.push_back(mv.pose);
     PathOptions po = o.path;
@@ -345,6 +402,7 @@ Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const P
   }
 
   Posted out;
+  out.refused = refused;
   NcProgram& p = out.program;
   p.name = name;
   p.header = header;

@@ -129,7 +129,9 @@ struct Posted {
   // With a part: the program's text was back-simulated (postproc/verify.h) in PostOptions::dialect.
   bool links_checked = false;
   int worst_line = 0;        // the first colliding or gouging line, 0 when clean
-  std::string refused;       // "LINE: holder collision D mm at (..) in motion block B (rapid)", "" when clean
+  // Why the program must not run, "" when clean: "back-simulation: FILE:LINE: holder collision D mm
+  // at (..) in motion block B (rapid); ..." or "link planning: patch 'P': no lead-out off CL move K ...".
+  std::string refused;
   double min_link_clearance_mm = INFINITY;  // over every rapid block and component
 };
 
@@ -140,9 +142,13 @@ struct Posted {
 // patch and pose when a pose is out of reach.
 // With PostOptions::part the links are planned against it: the CL-data's own approach and leave
 // moves (rapids before the first feed move, axial lead-in/out) are replaced by a lead-in and a
-// lead-out along the surface normal; under TCP the moves between safe Z and the cut follow the
-// tool axis; the emitted text is back-simulated and, when a motion still hits the part, planned
-// again with doubled distances, else returned with `refused` set (nothing is thrown).
+// lead-out along the surface normal (or turned, lifted, farther out where that is not clear), each
+// lead point chosen by the back-simulation's own judgement of the lead and the rapid along the axis
+// above it; under TCP the moves between safe Z and the cut follow the tool axis; the emitted text is
+// back-simulated and, when a motion still hits the part, planned again with doubled distances (a
+// lead with no clear point at those keeps one at the configured distances), else returned with
+// `refused` set (nothing is thrown). A lead with no clear point at all is refused the same way,
+// before any back-simulation.
 [[nodiscard]] Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o,
                           const std::string& name, const std::vector<std::string>& header);
 
