@@ -517,3 +517,120 @@ TEST_CASE("a floor rising away from the flank: the links are lifted off it inste
   const VerifyReport rep = verify_text(p.text, c.dialect, "wall", c.machine, part, p.tools, {});
   CHECK(rep.clean());
 }
+
+namespace {
+// The cylinder's wall (tool frame: the wall x = 4, the tip at z = 0, the pass y -20 .. 20) with a
+// plate 9 mm behind the tool at the lead-out, 20 mm high: a lead of 3 mm at a clearance of 1.5 mm
+// fits (the plain lead's far side 2 mm from it); at 6 and 3 mm or 12 and 6 mm (a retry's) none of
+// the planner's directions does. `fin`: a floor 2 mm under the tip and, at the lead-in, a fin whose
+// top edge stands 0.01 mm under the tip plane 4.5 mm beside the plain lead point's axis (0.5 mm off
+// the cutter's rim).
+TriMesh slot_part(const Eigen::Vector3d& origin, bool fin) {
+  TriMesh mesh = merged(wall(cylinder), test::box_mesh({-10, 0, -2.5}, {-9, 40, 20}));
+  if (fin) {
+    mesh = merged(mesh, test::box_mesh({-30, -40, -3}, {8, 40, -2}));
+    mesh = merged(mesh, test::box_mesh({-16, -25.5, -2.5}, {2, -24.5, -0.01}));
+  }
+  return moved(mesh, origin);
+}
+
+PostOptions slot_options(const VerifyCase& c, const SurfaceIndex& part) {
+  PostOptions o;
+  o.dialect = c.dialect;
+  o.path.tool_length_mm = 80;
+  o.part = &part;
+  o.gouge_tolerance_mm = 0.01;
+  o.clearance_mm = 1.5;
+  o.lead_mm = 3;
+  return o;
+}
+}  // namespace
+
+TEST_CASE("leads are planned as the back-simulation judges them: an edge beside the tool's end over a floor, a narrow slot at the lead-out") {
+  // The collision check that judged leads before saw the floor, not the fin, from every slab that
+  // could reach the fin; the back-simulation sees it (from 4.25 mm up the cutter) and the rapid
+  // ending beside it 0.5 mm close. The retries doubled lead and clearance for both leads, and the
+  // lead-out, with no clear point at those, took the plain one unchecked: 4 mm into the plate (HECC
+  // impeller all-patches: 1.9 mm into the next blade), and the program was refused. Judged as the
+  // back-simulation judges, the lead-in turns away from the fin and the lead-out fits the slot at
+  // the first try.
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(slot_part(origin, true));
+  const VerifyCase c = verify_cases()[1];  // xyzbc-trt, iso: joints
+  const PostOptions o = slot_options(c, part);
+  const PostInput in{pass(cylinder, origin), "wall", 80, assembly_from_meridian(meridian(cylinder), holder())};
+  const Posted p = post({in}, c.machine, o, "WALL", {"verify test"});
+  CHECK_MESSAGE(p.refused.empty(), p.refused);
+  CHECK(p.links_checked);
+  CHECK(p.min_link_clearance_mm >= o.clearance_mm);
+  // The leads as posted: 3 mm off the first and the last pose, the lead-in turned away from the fin.
+  const ClProgram& cl = p.sections.at(0).cl;
+  const ToolPose &lead_in = cl.moves.front().pose, &first = cl.moves.at(1).pose;
+  const ToolPose &last = cl.moves.at(cl.moves.size() - 2).pose, &lead_out = cl.moves.back().pose;
+  CHECK((lead_in.tip - first.tip).norm() == doctest::Approx(3));
+  CHECK((lead_out.tip - last.tip).norm() == doctest::Approx(3));
+  CHECK(lead_in.tip.y() - origin.y() > -20);  // not toward the fin (y < -24.5)
+  // The program's own back-simulation: no gouge, every rapid the clearance off the part.
+  const std::string text = nc_text(p.program, {c.dialect, false, o.path.tolerance_mm});
+  const VerifyReport rep = verify_text(text, c.dialect, "wall", c.machine, part, {{1, in.assembly, 80}}, {});
+  CHECK(rep.hits.empty());
+  double rapid_min = INFINITY;
+  for (const VerifiedBlock& b : rep.blocks)
+    if (b.rapid) rapid_min = std::min({rapid_min, b.min_clearance_mm[0], b.min_clearance_mm[1], b.min_clearance_mm[2]});
+  CHECK(rapid_min >= o.clearance_mm);
+  // The safe Z of the first try: the part's top (z 15) plus the safe height, not a retry's doubled one.
+  CHECK(p.program.safe_z < 15 + 2 * o.safe_height_mm);
+}
+
+TEST_CASE("a retry keeps the configured lead where its doubled one has no clear point: refused for the rapid it cannot move, not for a lead") {
+  // A rapid along the wall in the middle of the pass (y -2 to 0) touches it: no retry moves it, and
+  // each retry doubles the lead and the clearance, at which the lead-out has no clear point. The
+  // refusal names that rapid, and the lead-out of the program it refuses keeps the configured 3 mm
+  // and 1.5 mm (before, the doubled plain point went into the plate unchecked).
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(slot_part(origin, false));
+  const VerifyCase c = verify_cases()[1];  // xyzbc-trt, iso: joints
+  const PostOptions o = slot_options(c, part);
+  PostInput in{pass(cylinder, origin), "wall", 80, assembly_from_meridian(meridian(cylinder), holder())};
+  REQUIRE(in.cl.moves.size() == 25);
+  ClMove& touching = in.cl.moves[12];  // pose 10 of 0..20, after the two approach rapids
+  REQUIRE(touching.pose.tip.y() == doctest::Approx(origin.y()));
+  touching.rapid = true;
+  const Posted p = post({in}, c.machine, o, "WALL", {"verify test"});
+  INFO(p.refused);
+  REQUIRE(p.refused.find("WALL.nc:") != std::string::npos);
+  CHECK(p.refused.find("(rapid)") != std::string::npos);
+  // The refused program: the touching rapid is all that comes within the clearance of the part.
+  const std::string text = nc_text(p.program, {c.dialect, false, o.path.tolerance_mm});
+  VerifyOptions vo;
+  vo.link_clearance_mm = o.clearance_mm;
+  const VerifyReport rep = verify_text(text, c.dialect, "wall", c.machine, part, {{1, in.assembly, 80}}, vo);
+  REQUIRE_FALSE(rep.hits.empty());
+  for (const VerifyHit& h : rep.hits) {
+    CAPTURE(h.line);
+    CHECK(h.rapid);
+    const double y = rep.motion.at(size_t(h.position)).pose.tip.y() - origin.y();
+    CHECK(y >= -2 - 1e-6);  // on the rapid from pose 9 (y -2) to pose 10 (y 0)
+    CHECK(y <= 1e-6);
+  }
+  // The lead-in, in the open, twice doubled (12 mm); the lead-out, in the slot, the configured 3 mm.
+  const ClProgram& cl = p.sections.at(0).cl;
+  CHECK((cl.moves.front().pose.tip - cl.moves.at(1).pose.tip).norm() == doctest::Approx(12));
+  CHECK((cl.moves.back().pose.tip - cl.moves.at(cl.moves.size() - 2).pose.tip).norm() == doctest::Approx(3));
+}
+
+TEST_CASE("a lead with no clear point is refused in one line naming the patch, the lead and its pose, before any back-simulation") {
+  // The plate 6 mm behind the tool: the cutter's far side 2 mm from it during the cut, and every lead
+  // direction of the planner, 3 or 6 mm out, brings the assembly within 1.5 mm of the plate or the wall.
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(merged(wall(cylinder), test::box_mesh({-7, 0, -2.5}, {-6, 40, 20})), origin));
+  const VerifyCase c = verify_cases()[1];  // xyzbc-trt, iso: joints
+  const PostOptions o = slot_options(c, part);
+  const PostInput in{pass(cylinder, origin), "wall", 80, assembly_from_meridian(meridian(cylinder), holder())};
+  const Posted p = post({in}, c.machine, o, "WALL", {"verify test"});
+  INFO(p.refused);
+  CHECK(p.refused.rfind("link planning: patch 'wall': no lead-out off CL move 22 (tip 30.000, 30.000, -5.000)", 0) == 0);
+  CHECK(p.refused.find("at lead 3 and 6 mm, clearance 1.5 mm") != std::string::npos);
+  CHECK(p.refused.find('\n') == std::string::npos);
+  CHECK_FALSE(p.links_checked);
+}
