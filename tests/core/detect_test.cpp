@@ -32,6 +32,18 @@ double worst_overcut(const Detection& d) {
   return worst;
 }
 
+// Detection of cylinder tools against a part (check tolerance 0.005 mm), as `flankcam run` sets it up.
+CoverOptions cylinders_with_part(const Similarity& fr, const SurfaceIndex& part, double tolerance_mm) {
+  CoverOptions o;
+  o.patch.tolerance = fr.length_to_unit(tolerance_mm);
+  o.patch.fit.shape = ToolShape::Cylinder;
+  o.patch.fit.check.part = &part;
+  o.patch.fit.check.tolerance = fr.length_to_unit(0.005);
+  o.patch.orient_by_part = true;
+  o.patch.refit_with_check = false;
+  return o;
+}
+
 // The share of the area of Φ's vertices with `in(vertex)` that detection brings within the tolerance.
 template <class In>
 double covered_share(const TriMesh& phi, const Detection& d, double tolerance, In in) {
@@ -333,13 +345,7 @@ TEST_CASE("with a part: a post standing in front of a flank splits the cover, bo
   const Similarity fr = unit_diagonal_frame(phi_mm);
   const SurfaceIndex phi(transformed(phi_mm, fr));
   const SurfaceIndex post(transformed(test::box_mesh({1, 28, -10}, {30, 32, 100}, 4), fr));
-  CoverOptions o;
-  o.patch.tolerance = fr.length_to_unit(0.01);
-  o.patch.fit.shape = ToolShape::Cylinder;
-  o.patch.fit.check.part = &post;
-  o.patch.fit.check.tolerance = fr.length_to_unit(0.005);
-  o.patch.orient_by_part = true;
-  o.patch.refit_with_check = false;
+  const CoverOptions o = cylinders_with_part(fr, post, 0.01);
   const Detection d = detect_patches(phi, o);
   const double low = covered_share(phi_mm, d, o.patch.tolerance, [](const Eigen::Vector3d& x) { return x.y() < 20; });
   const double high = covered_share(phi_mm, d, o.patch.tolerance, [](const Eigen::Vector3d& x) { return x.y() > 40; });
@@ -368,14 +374,8 @@ TEST_CASE("with a part: a flank taller than the longest tool is cut in two tiers
   const Similarity fr = unit_diagonal_frame(phi_mm);
   const SurfaceIndex phi(transformed(phi_mm, fr));
   const SurfaceIndex floor(transformed(test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4), fr));
-  CoverOptions o;
-  o.patch.tolerance = fr.length_to_unit(0.02);
-  o.patch.fit.shape = ToolShape::Cylinder;
+  CoverOptions o = cylinders_with_part(fr, floor, 0.02);
   o.patch.fit.constraints.max_length = fr.length_to_unit(40);
-  o.patch.fit.check.part = &floor;
-  o.patch.fit.check.tolerance = fr.length_to_unit(0.005);
-  o.patch.orient_by_part = true;
-  o.patch.refit_with_check = false;
   const Detection d = detect_patches(phi, o);
   const double low = covered_share(phi_mm, d, o.patch.tolerance, [](const Eigen::Vector3d& x) { return x.z() < 15; });
   const double high = covered_share(phi_mm, d, o.patch.tolerance, [](const Eigen::Vector3d& x) { return x.z() > 45; });
