@@ -166,7 +166,17 @@ struct LeadDistances {
 // axis above it): the plan once judged the cutter grown by the clearance with the collision check,
 // whose per-slab nearest point missed a blade edge beside the cutter's end that a floor under the tip
 // hid (HECC impeller auto-7: 0.121 mm at clearance 0.5 in the back-simulation, then a retry).
-bool lead_clear(const LinkJudge& j, const ToolPose& p, const Eigen::Vector3d& q, double clearance) {
+// Why a lead candidate is not clear: the first block of its sweep that fails (1: the feed along the
+// lead, 2-3: the rapid up the tool axis), the component, and how far it is inside the part (> 0) or
+// inside the clearance (<= 0: its distance from the part).
+struct LeadMiss {
+  int block = 0;
+  Component component = Component::Tool;
+  double depth_mm = 0;
+  Eigen::Vector3d point = Eigen::Vector3d::Zero();
+};
+
+std::optional<LeadMiss> lead_clear(const LinkJudge& j, const ToolPose& p, const Eigen::Vector3d& q, double clearance) {
   const Eigen::Vector3d axis = p.axis.normalized();
   const double beyond = (q - j.centre).norm() + j.reach + clearance;
   ClProgram cl;
@@ -175,9 +185,15 @@ bool lead_clear(const LinkJudge& j, const ToolPose& p, const Eigen::Vector3d& q,
   vo.link_clearance_mm = clearance;
   const VerifyReport rep = verify_cl(cl, j.part, j.tool, vo, j.design);
   // Block 0 is the cut pose itself, judged with the cut.
-  if (std::any_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.block > 0; })) return false;
+  std::optional<LeadMiss> miss;
+  for (const VerifyHit& h : rep.hits)
+    if (h.block > 0 && (!miss || h.block < miss->block || (h.block == miss->block && h.depth_mm > miss->depth_mm)))
+      miss = LeadMiss{h.block, h.component, h.depth_mm, h.point};
+  if (miss) return miss;
   const auto& lead = rep.blocks.at(1).min_clearance_mm;
-  return lead[size_t(Component::Shank)] >= clearance && lead[size_t(Component::Holder)] >= clearance;
+  for (const Component c : {Component::Shank, Component::Holder})
+    if (lead[size_t(c)] < clearance) return LeadMiss{1, c, -lead[size_t(c)], p.tip};
+  return std::nullopt;
 }
 
 // The lead point off pose p, where the rapid along the tool axis from above ends and the lead-in
@@ -188,16 +204,43 @@ bool lead_clear(const LinkJudge& j, const ToolPose& p, const Eigen::Vector3d& q,
 // lead_clear passes. A flank in a narrow passage (HECC impeller: the plain lead point's rapid ran
 // the cutter 1.7 mm into the part) is entered from the side that is open. None: nullopt (the plain
 // point, unchecked, once let a retry's doubled lead-out run 1.9 mm into the impeller's next blade).
-std::optional<Eigen::Vector3d> lead_point(const LinkJudge& j, const ToolPose& p, const std::vector<LeadDistances>& levels) {
+// The result of lead_point: the point, or why none is: how many candidates failed in the feed along
+// the lead and in the rapid up the axis, and the shallowest of those misses.
+struct LeadSearch {
+  std::optional<Eigen::Vector3d> point;
+  int in_feed = 0, in_rapid = 0;
+  std::optional<LeadMiss> least;
+  [[nodiscard]] std::string why() const;
+};
+
+std::string LeadSearch::why() const {
+  if (!least) return {};
+  const std::string where = fmt::format("({:.3f}, {:.3f}, {:.3f})", least->point.x(), least->point.y(), least->point.z());
+  return fmt::format("{} candidates fail in the feed along the lead, {} in the rapid up the tool axis; the "
+                     "nearest miss: the {} {} in the {}",
+                     in_feed, in_rapid, to_string(least->component),
+                     least->depth_mm > 0 ? fmt::format("{:.3f} mm inside the part at {}", least->depth_mm, where)
+                                         : fmt::format("{:.3f} mm from the part", -least->depth_mm),
+                     least->block == 1 ? "feed" : "rapid");
+}
+
+LeadSearch lead_point(const LinkJudge& j, const ToolPose& p, const std::vector<LeadDistances>& levels) {
   const Eigen::Vector3d axis = p.axis.normalized(), n = lead_direction(j.part, p, j.tool.assembly.cutter_length());
   const std::vector<Eigen::Vector3d> offsets = lead_offsets(n, axis);
+  LeadSearch out;
   for (const LeadDistances& d : levels)
     for (const double f : {1.0, 2.0})
       for (const Eigen::Vector3d& offset : offsets) {
         const Eigen::Vector3d q = p.tip + f * d.lead_mm * offset;
-        if (lead_clear(j, p, q, d.clearance_mm)) return q;
+        const std::optional<LeadMiss> miss = lead_clear(j, p, q, d.clearance_mm);
+        if (!miss) {
+          out.point = q;
+          return out;
+        }
+        ++(miss->block == 1 ? out.in_feed : out.in_rapid);
+        if (!out.least || miss->depth_mm < out.least->depth_mm) out.least = miss;
       }
-  return std::nullopt;
+  return out;
 }
 
 struct PlannedLinks {
@@ -205,24 +248,31 @@ struct PlannedLinks {
   std::string problem;  // the lead no candidate of lead_point is clear for; "" when planned
 };
 
-// The CL-data with its links planned against the part: its own approach (rapids before the first
-// feed move and axial lead-ins) and leave (axial lead-outs and trailing rapids) replaced by a rapid to
-// a point `lead` off the first pose along the surface normal, a feed in along the normal, the cut, and
-// a feed out along the normal. `lead` is at least the cutter's radius variation plus the clearance:
-// from there a move along the axis cannot reach the finished flank of an hourglass tool.
-// `o`: this try's distances; `configured`: the job's, tried when this try's leave no clear lead (a
-// retry doubles them for every section, while one section's link had hit). A lead with no clear point
-// keeps the plain one in `cl` and is named in `problem`.
-PlannedLinks plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAssembly& a, const PostOptions& o,
-                        const PostOptions& configured) {
+// The moves of a CL program's cut: from the first feed move (its axial lead-in feeds skipped) to the
+// last feed move before its axial lead-out and trailing rapids. None (all rapids): first == size.
+std::pair<size_t, size_t> cut_range(const ClProgram& cl) {
   const size_t n = cl.moves.size();
   size_t first = 0;
   while (first < n && cl.moves[first].rapid) ++first;
-  if (first == n) return {cl, {}};
+  if (first == n) return {n, n};
   while (first + 1 < n && !cl.moves[first + 1].rapid && axial(cl.moves[first].pose, cl.moves[first + 1].pose)) ++first;
   size_t last = n - 1;
   while (last > first && cl.moves[last].rapid) --last;
   while (last > first && axial(cl.moves[last - 1].pose, cl.moves[last].pose)) --last;
+  return {first, last};
+}
+
+// What the planner judges a section's leads with: the back-simulation against `part`, and the lead
+// distances to try in order (`o`: this try's, `configured`: the job's; each at least the cutter's
+// radius variation plus the clearance: from there a move along the axis cannot reach the finished
+// flank of an hourglass tool).
+struct LeadPlanner {
+  LinkJudge judge;
+  std::vector<LeadDistances> levels;
+};
+
+LeadPlanner lead_planner(int tool_number, const SurfaceIndex& part, const ToolAssembly& a, const PostOptions& o,
+                         const PostOptions& configured) {
   double rmin = INFINITY, rmax = 0;
   for (const auto& c : a.cutter) rmin = std::min(rmin, c.y()), rmax = std::max(rmax, c.y());
   std::vector<LeadDistances> levels;
@@ -234,20 +284,39 @@ PlannedLinks plan_links(const ClProgram& cl, const SurfaceIndex& part, const Too
   for (const Eigen::Vector3d& v : part.mesh().vertices) box.extend(v);
   const bool apart = configured.cut_part && configured.design;
   VerifyTool tool;
-  tool.number = cl.tool, tool.assembly = a;
-  const LinkJudge judge{part, apart ? configured.design : nullptr, std::move(tool), back_simulation_options(configured),
-                        box.center(), 0.5 * box.diagonal().norm() + max_radius(a)};
+  tool.number = tool_number, tool.assembly = a;
+  return {LinkJudge{part, apart ? configured.design : nullptr, std::move(tool), back_simulation_options(configured),
+                    box.center(), 0.5 * box.diagonal().norm() + max_radius(a)},
+          std::move(levels)};
+}
+
+// The message of a lead that lead_point found no clear point for.
+std::string no_clear_lead(const char* which, size_t k, const ToolPose& pose, const std::vector<LeadDistances>& levels,
+                          const LeadSearch& found) {
+  return fmt::format("no {} off CL move {} (tip {:.3f}, {:.3f}, {:.3f}) is clear of the part: every direction within 90 "
+                     "degrees of the surface normal, lifted by up to a lead, at lead {:g} and {:g} mm, clearance {:g} mm ({})",
+                     which, k, pose.tip.x(), pose.tip.y(), pose.tip.z(), levels.back().lead_mm, 2 * levels.back().lead_mm,
+                     levels.back().clearance_mm, found.why());
+}
+
+// The CL-data with its links planned against the part: its own approach (rapids before the first
+// feed move and axial lead-ins) and leave (axial lead-outs and trailing rapids) replaced by a rapid to
+// a lead point off the first pose (lead_point), a feed in, the cut, and a feed out to a lead point off
+// the last pose. `o`: this try's distances; `configured`: the job's, tried when this try's leave no
+// clear lead (a retry doubles them for every section, while one section's link had hit). A lead with
+// no clear point keeps the plain one in `cl` and is named in `problem`.
+PlannedLinks plan_links(const ClProgram& cl, const SurfaceIndex& part, const ToolAssembly& a, const PostOptions& o,
+                        const PostOptions& configured) {
+  const auto [first, last] = cut_range(cl);
+  if (first == cl.moves.size()) return {cl, {}};
+  const LeadPlanner planner = lead_planner(cl.tool, part, a, o, configured);
   PlannedLinks out{cl, {}};
   out.cl.moves.clear();
   const auto lead_at = [&](const ClMove& mv, const size_t k, const char* which) -> Eigen::Vector3d {
-    if (const std::optional<Eigen::Vector3d> q = lead_point(judge, mv.pose, levels)) return *q;
-    if (out.problem.empty())
-      out.problem = fmt::format("no {} off CL move {} (tip {:.3f}, {:.3f}, {:.3f}) is clear of the part: every direction "
-                                "within 90 degrees of the surface normal, lifted by up to a lead, at lead {:g} and {:g} mm, "
-                                "clearance {:g} mm",
-                                which, k, mv.pose.tip.x(), mv.pose.tip.y(), mv.pose.tip.z(), levels.back().lead_mm,
-                                2 * levels.back().lead_mm, levels.back().clearance_mm);
-    return mv.pose.tip + levels.back().lead_mm * lead_direction(part, mv.pose, a.cutter_length());
+    const LeadSearch found = lead_point(planner.judge, mv.pose, planner.levels);
+    if (found.point) return *found.point;
+    if (out.problem.empty()) out.problem = no_clear_lead(which, k, mv.pose, planner.levels, found);
+    return mv.pose.tip + planner.levels.back().lead_mm * lead_direction(part, mv.pose, a.cutter_length());
   };
   const ClMove &p0 = cl.moves[first], &p1 = cl.moves[last];
   out.cl.moves.push_back({{lead_at(p0, first, "lead-in"), p0.pose.axis}, true, 0});
@@ -299,6 +368,56 @@ Posted post_once(const std::vector<PostInput>& inputs, const Machine& m, const P
                  const std::string& name, const std::vector<std::string>& header, bool preposition);
 
 }  // namespace
+
+LeadRange clear_lead_range(const ClProgram& cl, const ToolAssembly& a, const PostOptions& o) {
+  if (std::string why = o.validate(); !why.empty()) throw InputError("post options: " + why);
+  if (!o.part) throw InputError("clear_lead_range: no part");
+  LeadRange r;
+  std::tie(r.first, r.last) = cut_range(cl);
+  if (r.first == cl.moves.size()) return r;
+  r.kept_first = r.first, r.kept_last = r.last;
+  const LeadPlanner planner = lead_planner(cl.tool, *o.part, a, o, o);
+  const auto search = [&](size_t k) { return lead_point(planner.judge, cl.moves[k].pose, planner.levels); };
+  const auto clear = [&](size_t k) { return search(k).point.has_value(); };
+  // From an end whose lead is not clear inwards, by steps doubling, to a move whose lead is, then
+  // bisected back to the outermost such move between them (where clear and blocked moves alternate a
+  // clear one nearer the end may be passed over: the cut is then a little shorter, never unsafe).
+  // `inner`: the innermost move that may be kept; `dir`: +1 from the front, -1 from the back.
+  const auto outermost_clear = [&](size_t end, size_t inner, long dir) -> std::optional<size_t> {
+    long blocked = long(end), ok = -1;
+    for (long step = 1;; step *= 2) {
+      const long k = std::clamp(long(end) + dir * step, std::min(long(end), long(inner)), std::max(long(end), long(inner)));
+      if (k == blocked) return std::nullopt;  // the innermost move reached: no clear lead
+      if (clear(size_t(k))) {
+        ok = k;
+        break;
+      }
+      blocked = k;
+    }
+    while (std::abs(ok - blocked) > 1) {
+      const long mid = (ok + blocked) / 2;
+      (clear(size_t(mid)) ? ok : blocked) = mid;
+    }
+    return size_t(ok);
+  };
+  // Each end: kept when its lead is clear, else moved inwards (at least two moves of the cut stay).
+  const auto end_of = [&](size_t end, size_t inner, long dir, const char* which) -> std::optional<size_t> {
+    const LeadSearch found = search(end);
+    if (found.point) return end;
+    if (r.why.empty()) r.why = no_clear_lead(which, end, cl.moves[end].pose, planner.levels, found);
+    if (dir > 0 ? inner <= end : inner >= end) return std::nullopt;
+    return outermost_clear(end, inner, dir);
+  };
+  const std::optional<size_t> k0 = r.last > r.first ? end_of(r.first, r.last - 1, +1, "lead-in") : std::nullopt;
+  const std::optional<size_t> k1 = k0 ? end_of(r.last, *k0 + 1, -1, "lead-out") : std::nullopt;
+  if (!k0 || !k1) {
+    r.none = true;
+    if (r.why.empty()) r.why = "the cut has fewer than two moves";
+    return r;
+  }
+  r.kept_first = *k0, r.kept_last = *k1;
+  return r;
+}
 
 Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOptions& o, const std::string& name,
             const std::vector<std::string>& header) {

@@ -135,6 +135,22 @@ struct Posted {
   double min_link_clearance_mm = INFINITY;  // over every rapid block and component
 };
 
+// The stretch of a CL program's cut that can be entered and left clear of o.part (required), as
+// post() plans the links: the moves of the cut [first, last] (between its approach and its leave) and
+// the moves kept [kept_first, kept_last], the outermost ones off which the planner finds a clear
+// lead-in and lead-out (judged by the back-simulation with o's distances and options). An end whose
+// lead has no clear point is moved inwards (by doubling steps, then bisection) to the first move whose
+// lead has; `why` names the first lead that was not clear (empty: none was trimmed); `none`: no two
+// moves of the cut can be entered and left. A CL program without a feed move: first == moves.size().
+// Costs up to ~100 back-simulated lead candidates per move tried.
+struct LeadRange {
+  size_t first = 0, last = 0, kept_first = 0, kept_last = 0;
+  bool none = false;
+  std::string why;
+  [[nodiscard]] bool trimmed() const { return none || kept_first != first || kept_last != last; }
+};
+[[nodiscard]] LeadRange clear_lead_range(const ClProgram& cl, const ToolAssembly& assembly, const PostOptions& o);
+
 // Builds the program for one or several CL programs in order (a tool change for each new tool):
 // IK along each whole CL program (one branch per path), linearisation of feed moves, inverse-time
 // feeds stretched by the axis speeds, a safe approach for every rapid that changes the orientation

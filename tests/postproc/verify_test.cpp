@@ -1,6 +1,7 @@
 #include "postproc/verify.h"
 
 #include <doctest/doctest.h>
+#include <fmt/format.h>
 
 #include <cmath>
 #include <regex>
@@ -125,7 +126,7 @@ std::string lower_z(const std::string& line) {
 
 }  // namespace
 
-TEST_CASE("every shipped machine and dialect: the posted wall pass back-simulates clean, links clear of the part") {
+TEST_CASE("every shipped machine and dialect: the posted wall pass back-simulates clean, links clear of the part" * doctest::test_suite("heavy")) {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cone), origin));
   for (const VerifyCase& c : verify_cases()) {
@@ -201,7 +202,7 @@ TEST_CASE("a rapid through the part is a collision on its line") {
   MESSAGE("rapid through the wall: " << rep.first_problem("wall"));
 }
 
-TEST_CASE("hourglass tool: the CL-data's axial lead-in gouges the finished flank, the planned normal lead does not") {
+TEST_CASE("hourglass tool: the CL-data's axial lead-in gouges the finished flank, the planned normal lead does not" * doctest::test_suite("heavy")) {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(hourglass), origin));
   const VerifyTool tool{1, assembly_from_meridian(meridian(hourglass), holder()), 80};
@@ -582,7 +583,7 @@ TEST_CASE("leads are planned as the back-simulation judges them: an edge beside 
   CHECK(p.program.safe_z < 15 + 2 * o.safe_height_mm);
 }
 
-TEST_CASE("a retry keeps the configured lead where its doubled one has no clear point: refused for the rapid it cannot move, not for a lead") {
+TEST_CASE("a retry keeps the configured lead where its doubled one has no clear point: refused for the rapid it cannot move, not for a lead" * doctest::test_suite("heavy")) {
   // A rapid along the wall in the middle of the pass (y -2 to 0) touches it: no retry moves it, and
   // each retry doubles the lead and the clearance, at which the lead-out has no clear point. The
   // refusal names that rapid, and the lead-out of the program it refuses keeps the configured 3 mm
@@ -619,7 +620,7 @@ TEST_CASE("a retry keeps the configured lead where its doubled one has no clear 
   CHECK((cl.moves.back().pose.tip - cl.moves.at(cl.moves.size() - 2).pose.tip).norm() == doctest::Approx(3));
 }
 
-TEST_CASE("a lead with no clear point is refused in one line naming the patch, the lead and its pose, before any back-simulation") {
+TEST_CASE("a lead with no clear point is refused in one line naming the patch, the lead and its pose, before any back-simulation" * doctest::test_suite("heavy")) {
   // The plate 6 mm behind the tool: the cutter's far side 2 mm from it during the cut, and every lead
   // direction of the planner, 3 or 6 mm out, brings the assembly within 1.5 mm of the plate or the wall.
   const Eigen::Vector3d origin(30, 10, -5);
@@ -631,6 +632,45 @@ TEST_CASE("a lead with no clear point is refused in one line naming the patch, t
   INFO(p.refused);
   CHECK(p.refused.rfind("link planning: patch 'wall': no lead-out off CL move 22 (tip 30.000, 30.000, -5.000)", 0) == 0);
   CHECK(p.refused.find("at lead 3 and 6 mm, clearance 1.5 mm") != std::string::npos);
+  // Why: all 54 candidates (27 directions, 3 and 6 mm out) counted, and the nearest miss named.
+  CHECK(p.refused.find("(36 candidates fail in the feed along the lead, 18 in the rapid up the tool axis; the nearest "
+                       "miss: the tool 0.500 mm from the part in the rapid)") != std::string::npos);
   CHECK(p.refused.find('\n') == std::string::npos);
   CHECK_FALSE(p.links_checked);
+}
+
+TEST_CASE("a cut whose end has no clear lead is shortened to the outermost move that can be left, and that program posts clean" *
+          doctest::test_suite("heavy")) {
+  // The plate of the refusal above stands behind the second half of the pass (y >= 0 of -20..20):
+  // there no lead-out is clear, before it the plate is out of reach. clear_lead_range keeps the
+  // lead-in (y = -20, in the open) and moves the lead-out inwards to the last pose that can be left.
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(merged(wall(cylinder), test::box_mesh({-7, 0, -2.5}, {-6, 40, 20})), origin));
+  const VerifyCase c = verify_cases()[1];  // xyzbc-trt, iso: joints
+  const PostOptions o = slot_options(c, part);
+  const PostInput in{pass(cylinder, origin), "wall", 80, assembly_from_meridian(meridian(cylinder), holder())};
+  const LeadRange r = clear_lead_range(in.cl, in.assembly, o);
+  INFO(r.why);
+  CHECK(r.first == 2);  // after the CL-data's two approach rapids
+  CHECK(r.last == 22);  // pose 20 of 0..20, before its axial lead-out
+  CHECK(r.trimmed());
+  CHECK_FALSE(r.none);
+  CHECK(r.kept_first == r.first);
+  CHECK(r.why.rfind("no lead-out off CL move 22 (tip 30.000, 30.000, -5.000) is clear of the part", 0) == 0);
+  const double y_kept = in.cl.moves.at(r.kept_last).pose.tip.y() - origin.y();
+  CAPTURE(y_kept);
+  CHECK(y_kept <= 0);   // not beside the plate (from y 0 on): left along the wall away from it
+  CHECK(y_kept > -10);  // no farther from it than the cutter's radius, the lead and the clearance
+  // Shortened there, the program posts clean; one pose longer, its lead-out has no clear point.
+  const auto cut_at = [&](size_t last) {
+    PostInput shorter = in;
+    shorter.cl.moves.erase(shorter.cl.moves.begin() + long(last) + 1, shorter.cl.moves.end());
+    return post({shorter}, c.machine, o, "WALL", {"verify test"});
+  };
+  const Posted kept = cut_at(r.kept_last);
+  CHECK_MESSAGE(kept.refused.empty(), kept.refused);
+  CHECK(kept.links_checked);
+  CHECK(kept.min_link_clearance_mm >= o.clearance_mm);
+  const Posted longer = cut_at(r.kept_last + 1);
+  CHECK(longer.refused.find(fmt::format("no lead-out off CL move {} ", r.kept_last + 1)) != std::string::npos);
 }

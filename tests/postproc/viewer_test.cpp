@@ -253,7 +253,7 @@ TEST_CASE("decimate keeps the triangle budget, maps every vertex nearby, and lea
   }
 }
 
-TEST_CASE("a 200k-triangle surface and part give a page under 20 MB, within the triangle budgets") {
+TEST_CASE("a 200k-triangle surface and part give a page under 20 MB, within the triangle budgets" * doctest::test_suite("heavy")) {
   ViewerScene s = small_scene();
   s.surface_mm = test::wavy_grid(317, 317, 200, 200, 10);
   s.part_mm = test::wavy_grid(317, 317, 200, 200, 30);
@@ -529,7 +529,7 @@ TEST_CASE("verify view refuses a marker that jumps outside its track") {
   CHECK_NOTHROW((void)viewer_json(s));
 }
 
-TEST_CASE("verify view of a 200k-triangle surface and part with eight long programs: a page under 20 MB, the hits' frames kept") {
+TEST_CASE("verify view of a 200k-triangle surface and part with eight long programs: a page under 20 MB, the hits' frames kept" * doctest::test_suite("heavy")) {
   const TriMesh surface = test::wavy_grid(317, 317, 200, 200, 10), part = test::wavy_grid(317, 317, 200, 200, 30);
   REQUIRE(surface.faces.size() > 199000);
   // Eight programs of 30000 simulated positions each, as verify reports them (no simulation here).
