@@ -130,6 +130,14 @@ std::optional<LoadedMesh> load_job_part(const Job& job) {
 }
 
 namespace {
+// How a patch's machined surface is judged: `init:` patches with the job's tool end; detected
+// patches (detect_job) by the side envelope alone, as the detection judged them.
+MachinedSurfaceOptions machined_options(const Job& job, const Similarity& frame) {
+  MachinedSurfaceOptions m;
+  if (!job.cover) m.end = ToolEnd{job.tool.end.kind, frame.length_to_unit(job.tool.end.corner_radius), frame.length_to_mm(1.0)};
+  return m;
+}
+
 // The fitted motion at its samples t_i in mm (part coordinates), with the overtravel poses.
 std::vector<ToolPose> poses_mm(const Job& job, const Similarity& frame, const Rails& rails) {
   const int m = job.fit.samples_t;
@@ -488,7 +496,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
     PatchOptions o;
     o.fit = fit_options();
     o.tolerance = out.frame.length_to_unit(job.tolerance_mm);
-    o.machined.end = ToolEnd{job.tool.end.kind, out.frame.length_to_unit(job.tool.end.corner_radius), out.frame.length_to_mm(1.0)};
+    o.machined = machined_options(job, out.frame);
     o.on_stage = [&](const std::string& s) { progress(fmt::format("patch {}: {}", p.name, s)); };
     o.fit.on_iteration = [&](int it, double objective) {
       progress(fmt::format("patch {}: iteration {}, F_motion {:.3e}", p.name, it, objective));
@@ -696,6 +704,8 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
     c["note"] = "intrusion: beyond check_tolerance for the cutter, inside the clearance for shank and holder (<= 0: clear)";
     j["check_surface"] = std::move(c);
   }
+  // flankcam run: the cut shortened where its lead had no clear point (kept_t above is after it).
+  if (!p.kept_for_leads.empty()) j["shortened_for_leads"] = p.kept_for_leads;
   j["collision_check"] = {{"part", job.part.string()},
                           {"clearance_mm", job.clearance_mm},
                           {"gouge_tolerance_mm", job.tolerance_mm},
@@ -761,6 +771,63 @@ ClProgram pass_program(const Job& job, const FittedJob& f, const FittedPatch& p,
                                     job.surface.filename().string(), pm.eps_mm));
   (void)f;
   return cl;
+}
+
+void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<KeptPoses>>& keep, const Progress& progress) {
+  if (std::none_of(keep.begin(), keep.end(), [](const auto& k) { return k.has_value(); })) return;
+  const SurfaceIndex design(f.unit_surface);
+  const double tolerance = f.frame.length_to_unit(job.tolerance_mm);
+  const MachinedSurfaceOptions mo = machined_options(job, f.frame);
+  const int m = job.fit.samples_t;
+  const size_t before = job.overtravel_mm > 0 ? 1 : 0;  // poses_mm: the overtravel pose before t = 0
+  for (size_t k = 0; k < keep.size() && k < f.patches.size(); ++k) {
+    if (!keep[k]) continue;
+    FittedPatch& p = f.patches[k];
+    const size_t i0 = keep[k]->first, i1 = std::min(keep[k]->last, p.poses.size() - 1);
+    if (!(i0 < i1)) throw InputError(fmt::format("patch {}: keep_poses: poses {}-{} of {}", p.job->name, i0, i1, p.poses.size()));
+    // The rails between the kept poses' parameters (an overtravel pose kept: its end of the motion).
+    const auto t_of = [&](size_t i) { return double(std::clamp<long>(long(i) - long(before), 0, m - 1)) / (m - 1); };
+    const double t0 = t_of(i0), t1 = t_of(i1), w = p.fit.t_to - p.fit.t_from;
+    const double coverage_before = p.fit.coverage;
+    p.fit.fit.rails = trimmed(p.fit.fit.rails, t0, t1);
+    p.fit.t_to = p.fit.t_from + w * t1;
+    p.fit.t_from += w * t0;
+    // Judged against the fit's target: Φ, or Φ offset by the allowance.
+    const double allowance = job.passes_mm.empty() ? job.allowance_mm : job.passes_mm.back();
+    std::optional<SurfaceIndex> offset;
+    if (allowance > 0) offset.emplace(offset_mesh(f.unit_surface, f.frame.length_to_unit(allowance), p.allowance_side));
+    const SurfaceIndex& target = offset ? *offset : design;
+    p.fit.machined = machined_surface(target, p.fit.fit.rails, p.fit.fit.tool, mo);
+    p.fit.coverage = coverage(f.unit_surface, p.fit.machined.design_deviation, tolerance);
+    const auto cut = [&](auto& v) {
+      if (v.size() != p.poses.size()) return;
+      v.erase(v.begin() + long(i1) + 1, v.end());
+      v.erase(v.begin(), v.begin() + long(i0));
+    };
+    const size_t total = p.poses.size();
+    for (PassMotion& pm : p.earlier_passes) cut(pm.contacts), cut(pm.poses);  // their poses index like the last pass's
+    cut(p.contacts);
+    cut(p.poses);
+    p.kept_for_leads = fmt::format("poses {}-{} of {} kept (t {:.3f}-{:.3f}): {}", i0 + 1, i1 + 1, total,
+                                   p.fit.t_from, p.fit.t_to, keep[k]->why);
+    progress(fmt::format("patch {}: {}; coverage {:.1f}% -> {:.1f}%", p.job->name, p.kept_for_leads, 100 * coverage_before,
+                         100 * p.fit.coverage));
+  }
+  if (!f.cover) return;
+  std::vector<const MachinedSurface*> ms;
+  for (const FittedPatch& p : f.patches) ms.push_back(&p.fit.machined);
+  UnionDeviation u = union_deviation(ms, f.unit_surface.vertices.size());
+  CoverResult& c = *f.cover;
+  c.owner = std::move(u.owner);
+  c.coverage = coverage(f.unit_surface, u.deviation, tolerance);
+  c.overcut_mm = 0;
+  c.deviation_mm = std::move(u.deviation);
+  for (double& x : c.deviation_mm) {
+    if (std::isfinite(x)) c.overcut_mm = std::max(c.overcut_mm, -x);
+    x = f.frame.length_to_mm(x);
+  }
+  c.overcut_mm = f.frame.length_to_mm(c.overcut_mm);
+  progress(cover_summary(job, f) + " after the cuts were shortened for their leads");
 }
 
 ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p, int tool) {

@@ -46,6 +46,9 @@ struct FittedPatch {
   std::optional<CustomComparison> custom;  // catalogue jobs only
   std::vector<PassMotion> earlier_passes;  // `passes:`: every pass but the last (which is `fit`), in order
   int allowance_side = 0;        // allowance: +1/-1 the side of the design surface's normals the fit's target lies on
+  // flankcam run: the motion shortened at an end whose lead had no clear point ("poses A-B of N kept
+  // (t ..): no lead-out off ..."); empty: the whole motion is cut.
+  std::string kept_for_leads;
 };
 
 // `patches: auto`: the whole surface as the union of the detected patches (core/detect.h).
@@ -121,6 +124,17 @@ void check_job(const Job& job, FittedJob& fitted, const Progress& progress);
 
 // One line per collision interval: "patch P: holder collides at poses 12-17, 0.731 mm deep at (x, y, z)".
 [[nodiscard]] std::vector<std::string> collision_summary(const FittedPatch& patch);
+
+// Poses first..last (FittedPatch::poses indices, overtravel poses counted) of a patch kept, `why`.
+struct KeptPoses {
+  size_t first = 0, last = 0;
+  std::string why;
+};
+// Each patch with a `keep` entry shortened to those poses (flankcam run: the cut entered and left
+// where the link planner finds clear leads): its poses and contacts (and its earlier passes'), its
+// rails trimmed to the same stretch, its machined surface and coverage anew, and with `patches: auto`
+// the cover's union; one progress line each.
+void keep_poses(const Job& job, FittedJob& fitted, const std::vector<std::optional<KeptPoses>>& keep, const Progress& progress);
 
 // The patch's CL-data (APT model): approach, the fitted poses at the job's feed, retract; the tool's
 // meridian in mm; a comment with the fitted error and one flagging allowed collisions.

@@ -26,9 +26,10 @@ Machine find_machine(const std::string& name_or_path, const std::filesystem::pat
   const fs::path dir = machines_dir();
   const fs::path shipped = dir / (name_or_path + ".yaml");
   if (is_file(shipped)) return load(shipped);
-  std::vector<std::string> names;
-  for (const auto& e : fs::directory_iterator(dir))
-    if (e.path().extension() == ".yaml") names.push_back(e.path().stem().string());
+  std::vector<std::string> names;  // the shipped ones; an unreadable machines/ lists none (no exception)
+  std::error_code ec;
+  for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec))
+    if (it->path().extension() == ".yaml") names.push_back(it->path().stem().string());
   std::sort(names.begin(), names.end());
   throw InputError(fmt::format("machine '{}': no such file, and not one of the shipped machines ({})", name_or_path,
                                fmt::join(names, ", ")));

@@ -321,27 +321,26 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
   const ThreadScope threads(options.threads);
   // Kinematics and programs for every patch allowed to run, all solved before any file is written:
   // an unreachable pose ends the run with nothing half done.
-  std::vector<PostInput> inputs;  // work coordinates
   r.posted_cl.resize(r.fit.fitted.patches.size());
   std::optional<SurfaceIndex> design;  // depth_cuts: the contacts of the levels (part coordinates, mm)
   if (j.depth_cuts > 1) design.emplace(r.fit.fitted.surface.mesh);
-  for (size_t k = 0; k < r.fit.fitted.patches.size(); ++k) {
+  // A patch's sections (part coordinates): passes, each its own section of the patch's program, in
+  // order, the last pass being the fit; depth_cuts: within each pass its levels, the deepest last.
+  const auto sections_of = [&](size_t k) {
     const FittedPatch& p = r.fit.fitted.patches[k];
-    r.tool_length_mm.push_back(tool_length(j, p));
-    if (!r.fit.cl_data[k]) continue;
-    const ToolAssembly& assembly = p.assembly;  // the cutter the collision check judged: the tool's meridian
-    // passes: each its own section of the patch's program, in order, the last pass being the fit;
-    // depth_cuts: within each pass its levels, the deepest last (passes outer, levels inner).
     std::vector<ClProgram> passes, sections;
     for (const PassMotion& pm : p.earlier_passes) passes.push_back(pass_program(j, r.fit.fitted, p, pm, r.fit.cl_data[k]->tool));
     passes.push_back(*r.fit.cl_data[k]);
     for (const ClProgram& pass : passes)
       for (int level = 1; level <= j.depth_cuts; ++level)
         sections.push_back(j.depth_cuts == 1 ? pass : depth_level(pass, p, level, j.depth_cuts, *design));
-    r.posted_cl[k] = all_passes(sections);  // replaced by the programs' planned links below
-    for (ClProgram& section : sections) inputs.push_back({to_work(j.post, std::move(section)), p.job->name, r.tool_length_mm.back(), assembly});
+    return sections;
+  };
+  const size_t patches = r.fit.fitted.patches.size();
+  if (std::none_of(r.fit.cl_data.begin(), r.fit.cl_data.end(), [](const auto& c) { return c.has_value(); })) {
+    for (const FittedPatch& p : r.fit.fitted.patches) r.tool_length_mm.push_back(tool_length(j, p));
+    return r;
   }
-  if (inputs.empty()) return r;
   // The part placed on the machine (work frame): the links are planned against it, and every
   // program is back-simulated from its text before anything is written.
   const SurfaceIndex part_index(to_work(j.post, r.fit.fitted.part ? *r.fit.fitted.part : r.fit.fitted.surface.mesh));
@@ -361,6 +360,39 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     settings.options.gouge_tolerance_mm = c.part_mm;
     settings.options.design_gouge_tolerance_mm = c.design_mm;
     settings.options.design_within_mm = c.design_within_mm;
+  }
+  // A cut whose end has no clear lead (a tool standing deep in a passage where the motion was trimmed
+  // for the part) is shortened to the outermost poses that can be entered and left, every section of
+  // the patch alike; its coverage and the cover's union are judged anew (keep_poses). None: refused.
+  std::vector<std::optional<KeptPoses>> keep(patches);
+  for (size_t k = 0; k < patches; ++k) {
+    if (!r.fit.cl_data[k]) continue;
+    const FittedPatch& p = r.fit.fitted.patches[k];
+    size_t i0 = 0, i1 = p.poses.size() - 1;
+    std::string why;
+    for (const ClProgram& section : sections_of(k)) {
+      const LeadRange lr = clear_lead_range(to_work(j.post, section), p.assembly, settings.options);
+      if (lr.none) throw ProgramRefused(fmt::format("link planning: patch '{}': {}; nothing written", p.job->name, lr.why));
+      if (!lr.trimmed()) continue;
+      i0 = std::max(i0, lr.kept_first - lr.first);
+      i1 = std::min(i1, lr.kept_last - lr.first);
+      if (why.empty()) why = lr.why;
+    }
+    if (why.empty()) continue;
+    if (!(i0 < i1)) throw ProgramRefused(fmt::format("link planning: patch '{}': {}; nothing written", p.job->name, why));
+    keep[k] = KeptPoses{i0, i1, why};
+  }
+  keep_poses(j, r.fit.fitted, keep, options.progress);
+  std::vector<PostInput> inputs;  // work coordinates
+  for (size_t k = 0; k < patches; ++k) {
+    const FittedPatch& p = r.fit.fitted.patches[k];
+    r.tool_length_mm.push_back(tool_length(j, p));
+    if (!r.fit.cl_data[k]) continue;
+    if (keep[k]) r.fit.cl_data[k] = patch_program(j, r.fit.fitted, p, r.fit.cl_data[k]->tool);
+    std::vector<ClProgram> sections = sections_of(k);
+    r.posted_cl[k] = all_passes(sections);  // replaced by the programs' planned links below
+    // The cutter the collision check judged: the tool's meridian.
+    for (ClProgram& section : sections) inputs.push_back({to_work(j.post, std::move(section)), p.job->name, r.tool_length_mm.back(), p.assembly});
   }
   const Machine& m = r.machine;
   options.progress(fmt::format("kinematics and post: {} patch(es) on {} ({})", inputs.size(), m.name, m.kind()));

@@ -4,10 +4,13 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <string>
 
+#include "core/check_surface.h"
 #include "core/errors.h"
+#include "core/mesh.h"
 #include "core/number_format.h"
 #include "pipeline/run.h"
 #include "postproc/gcode.h"
@@ -198,4 +201,96 @@ TEST_CASE("depth_cuts: 3 makes three sections of the patch's program, the tip 2/
     CHECK(l2 < l3);
   }
   CHECK(programs == 1);
+}
+
+TEST_CASE("flankcam run: a cut whose end has no clear lead is shortened to where it can be left; its coverage is judged anew" *
+          doctest::test_suite("heavy")) {
+  // The blade's patch fitted without a part; then a block beside the last third of that motion, 0.5 mm
+  // beyond the cutter's widest side, the part with the blade: the cut itself stays clear (the fit
+  // keeps the same motion), but off its last poses every lead candidate runs the cutter into the block
+  // or keeps it on the flank in the rapid up its axis. The run shortens the cut to the last pose that
+  // can be left, judges its coverage anew and posts clean programs.
+  test::ScratchDir dir("lead-trim");
+  const std::string job = blade_job("tool: {shape: cone}\n");
+  test::write_text(dir.file("plain.yaml"), job);
+  const pipeline::FitRun plain = pipeline::fit(pipeline::read_job(dir.file("plain.yaml")), {});
+  const pipeline::FittedPatch& p0 = plain.fitted.patches.at(0);
+  const size_t n = p0.poses.size();
+  REQUIRE(n > 20);
+  double r_max = 0, h = 0;
+  for (const Eigen::Vector2d& zr : p0.profile_mm) r_max = std::max(r_max, zr.y()), h = std::max(h, zr.x());
+  // The tool's side of the blade at the end (the blade's flank runs along x, its normal along y).
+  const ToolPose& end = p0.poses.back();
+  const double side = (end.tip + 0.5 * h * end.axis - p0.contacts.back()).y() > 0 ? 1 : -1;
+  const size_t from = 2 * n / 3;
+  double x0 = INFINITY, x1 = -INFINITY, near = -INFINITY, z0 = INFINITY, z1 = -INFINITY;
+  for (size_t i = from; i < n; ++i)
+    for (double z = 0; z <= h; z += 0.5) {
+      const Eigen::Vector3d c = p0.poses[i].tip + z * p0.poses[i].axis.normalized();
+      x0 = std::min(x0, c.x()), x1 = std::max(x1, c.x()), z0 = std::min(z0, c.z()), z1 = std::max(z1, c.z());
+      near = std::max(near, side * c.y() + r_max);
+    }
+  const double y_near = side * (near + 0.5), y_far = side * (near + 3);
+  const double forward = end.tip.x() > p0.poses.front().tip.x() ? 1 : -1;  // the motion's direction along x
+  if (forward > 0) x1 += 15;
+  else x0 -= 15;
+  const TriMesh block = test::box_mesh({x0, std::min(y_near, y_far), z0 - 2}, {x1, std::max(y_near, y_far), z1 - 2});
+  write_obj(dir.file("part.obj"), merged(load_mesh(std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj").mesh, block));
+  test::write_text(dir.file("job.yaml"), "part: part.obj\n" + job);
+  pipeline::Job j = pipeline::read_job(dir.file("job.yaml"));
+  const Machine machine = pipeline::check_run(j);
+  std::vector<std::string> progress;
+  pipeline::RunOptions o;
+  o.progress = [&](const std::string& s) { progress.push_back(s); };
+  const pipeline::RunResult run = pipeline::run(std::move(j), machine, o);
+  const pipeline::FittedPatch& p = run.fit.fitted.patches.at(0);
+  INFO(p.kept_for_leads);
+  REQUIRE_FALSE(p.kept_for_leads.empty());
+  CHECK(p.kept_for_leads.find("no lead-out off CL move") != std::string::npos);
+  // Shortened at its end only, to the poses before the block (give or take the lead and the cutter).
+  CHECK(p.poses.front().tip.isApprox(p0.poses.front().tip, 1e-9));
+  CHECK(p.poses.size() < n);
+  CHECK(p.poses.size() > from / 2);
+  CHECK(p.fit.t_from == doctest::Approx(p0.fit.t_from));
+  CHECK(p.fit.t_to < p0.fit.t_to);
+  // Judged anew: the coverage lost what the dropped poses machined, and only that: every vertex within
+  // the tolerance before and not after lies nearer the dropped poses' axes than the kept ones'.
+  CHECK(p.fit.coverage < p0.fit.coverage - 0.02);
+  CHECK(p.fit.coverage > 0.4 * p0.fit.coverage);
+  const auto& verts = run.fit.fitted.surface.mesh.vertices;
+  const double tol = run.fit.fitted.frame.length_to_unit(0.015);
+  const auto axis_distance = [&](const Eigen::Vector3d& v, size_t i0, size_t i1) {
+    double best = INFINITY;
+    for (size_t i = i0; i < i1; ++i) {
+      const Eigen::Vector3d e = p0.poses[i].axis.normalized(), d = v - p0.poses[i].tip;
+      best = std::min(best, (d - d.dot(e) * e).norm());
+    }
+    return best;
+  };
+  const size_t kept = p.poses.size();
+  int lost = 0, lost_near_kept = 0;
+  for (size_t v = 0; v < verts.size(); ++v) {
+    const double d = p.fit.machined.design_deviation[v], d0 = p0.fit.machined.design_deviation[v];
+    if (!(std::isfinite(d0) && std::abs(d0) <= tol) || (std::isfinite(d) && std::abs(d) <= tol)) continue;
+    ++lost;
+    lost_near_kept += axis_distance(verts[v], 0, kept) < axis_distance(verts[v], kept, n);
+  }
+  MESSAGE("coverage ", p0.fit.coverage, " -> ", p.fit.coverage, ", ", lost, " vertices lost, ", lost_near_kept, " of them nearer the kept poses");
+  CHECK(lost > 0);
+  CHECK(lost_near_kept <= lost / 20);  // the seam: a vertex between the last kept and the first dropped pose
+  // The program: its cut is the kept poses, it was back-simulated clean with its links.
+  REQUIRE(run.posted_cl.at(0));
+  std::vector<ToolPose> cut;
+  for (const ClMove& mv : run.posted_cl[0]->moves)
+    if (mv.contact.allFinite()) cut.push_back(mv.pose);
+  REQUIRE(cut.size() == p.poses.size());
+  CHECK(cut.back().tip.isApprox(p.poses.back().tip, 1e-6));
+  bool posted = false;
+  for (const pipeline::PostedProgram& w : run.programs) {
+    CHECK(w.posted.refused.empty());
+    CHECK(w.posted.links_checked);
+    posted = posted || w.patch == "blade";
+  }
+  CHECK(posted);
+  CHECK(std::any_of(progress.begin(), progress.end(), [](const std::string& s) { return s.find("kept (t ") != std::string::npos; }));
 }
