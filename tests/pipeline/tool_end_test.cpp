@@ -203,7 +203,7 @@ TEST_CASE("depth_cuts: 3 makes three sections of the patch's program, the tip 2/
   CHECK(programs == 1);
 }
 
-TEST_CASE("flankcam run: a cut whose end has no clear lead is shortened to where it can be left; its coverage is judged anew" *
+TEST_CASE("flankcam run: a cut whose end has no clear lead is shortened to where it can be left, its coverage judged anew" *
           doctest::test_suite("heavy")) {
   // The blade's patch fitted without a part; then a block beside the last third of that motion, 0.5 mm
   // beyond the cutter's widest side, the part with the blade: the cut itself stays clear (the fit
