@@ -775,7 +775,7 @@ ClProgram pass_program(const Job& job, const FittedJob& f, const FittedPatch& p,
 
 void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<KeptPoses>>& keep, const Progress& progress) {
   if (std::none_of(keep.begin(), keep.end(), [](const auto& k) { return k.has_value(); })) return;
-  const SurfaceIndex design(f.unit_surface);
+  std::optional<SurfaceIndex> design;  // Φ (unit frame), built for the first patch judged against it
   const double tolerance = f.frame.length_to_unit(job.tolerance_mm);
   const MachinedSurfaceOptions mo = machined_options(job, f.frame);
   const int m = job.fit.samples_t;
@@ -796,7 +796,8 @@ void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<Ke
     const double allowance = job.passes_mm.empty() ? job.allowance_mm : job.passes_mm.back();
     std::optional<SurfaceIndex> offset;
     if (allowance > 0) offset.emplace(offset_mesh(f.unit_surface, f.frame.length_to_unit(allowance), p.allowance_side));
-    const SurfaceIndex& target = offset ? *offset : design;
+    if (!offset && !design) design.emplace(f.unit_surface);
+    const SurfaceIndex& target = offset ? *offset : *design;
     p.fit.machined = machined_surface(target, p.fit.fit.rails, p.fit.fit.tool, mo);
     p.fit.coverage = coverage(f.unit_surface, p.fit.machined.design_deviation, tolerance);
     const auto cut = [&](auto& v) {

@@ -365,21 +365,26 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
   // for the part) is shortened to the outermost poses that can be entered and left, every section of
   // the patch alike; its coverage and the cover's union are judged anew (keep_poses). None: refused.
   std::vector<std::optional<KeptPoses>> keep(patches);
+  std::vector<std::vector<ClProgram>> sections(patches);
+  const auto refuse = [&](const FittedPatch& p, const std::string& why) {
+    return ProgramRefused(fmt::format("link planning: patch '{}': {}; nothing written", p.job->name, why));
+  };
   for (size_t k = 0; k < patches; ++k) {
     if (!r.fit.cl_data[k]) continue;
     const FittedPatch& p = r.fit.fitted.patches[k];
+    sections[k] = sections_of(k);
     size_t i0 = 0, i1 = p.poses.size() - 1;
     std::string why;
-    for (const ClProgram& section : sections_of(k)) {
+    for (const ClProgram& section : sections[k]) {
       const LeadRange lr = clear_lead_range(to_work(j.post, section), p.assembly, settings.options);
-      if (lr.none) throw ProgramRefused(fmt::format("link planning: patch '{}': {}; nothing written", p.job->name, lr.why));
+      if (lr.none) throw refuse(p, lr.why);
       if (!lr.trimmed()) continue;
       i0 = std::max(i0, lr.kept_first - lr.first);
       i1 = std::min(i1, lr.kept_last - lr.first);
       if (why.empty()) why = lr.why;
     }
     if (why.empty()) continue;
-    if (!(i0 < i1)) throw ProgramRefused(fmt::format("link planning: patch '{}': {}; nothing written", p.job->name, why));
+    if (!(i0 < i1)) throw refuse(p, why);
     keep[k] = KeptPoses{i0, i1, why};
   }
   keep_poses(j, r.fit.fitted, keep, options.progress);
@@ -388,11 +393,13 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     const FittedPatch& p = r.fit.fitted.patches[k];
     r.tool_length_mm.push_back(tool_length(j, p));
     if (!r.fit.cl_data[k]) continue;
-    if (keep[k]) r.fit.cl_data[k] = patch_program(j, r.fit.fitted, p, r.fit.cl_data[k]->tool);
-    std::vector<ClProgram> sections = sections_of(k);
-    r.posted_cl[k] = all_passes(sections);  // replaced by the programs' planned links below
+    if (keep[k]) {  // its CL-data and sections anew from the kept poses
+      r.fit.cl_data[k] = patch_program(j, r.fit.fitted, p, r.fit.cl_data[k]->tool);
+      sections[k] = sections_of(k);
+    }
+    r.posted_cl[k] = all_passes(sections[k]);  // replaced by the programs' planned links below
     // The cutter the collision check judged: the tool's meridian.
-    for (ClProgram& section : sections) inputs.push_back({to_work(j.post, std::move(section)), p.job->name, r.tool_length_mm.back(), p.assembly});
+    for (ClProgram& section : sections[k]) inputs.push_back({to_work(j.post, std::move(section)), p.job->name, r.tool_length_mm.back(), p.assembly});
   }
   const Machine& m = r.machine;
   options.progress(fmt::format("kinematics and post: {} patch(es) on {} ({})", inputs.size(), m.name, m.kind()));
