@@ -524,8 +524,8 @@ ToolRadius constrained_tool(const ToolRadius& tool, double L, const ToolConstrai
 ConstraintCheck check_constraints(const ToolRadius& tool, double L, const ToolConstraints& c) {
   const std::vector<Eigen::Vector2d> mer = meridian(tool, L, 121);
   ConstraintCheck out;
-  const auto note = [&](double v, const char* what) {
-    if (v > out.violation) out.violation = v, out.what = what;
+  const auto note = [&](double v, const char* what) {  // rounding (a meridian at its bound) is no violation
+    if (v > out.violation && v > kConstraintSlack) out.violation = v, out.what = what;
   };
   double rmin = INFINITY, rmax = 0;
   for (const auto& p : mer) rmin = std::min(rmin, p.y()), rmax = std::max(rmax, p.y());

@@ -637,7 +637,7 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
     if (job.tool.min_tip_diameter_mm > 0) lim["min_tip_diameter_mm"] = job.tool.min_tip_diameter_mm;
     if (job.tool.max_cone_angle_deg < 90) lim["max_cone_angle_deg"] = job.tool.max_cone_angle_deg;
     if (job.tool.convex) lim["convex"] = true;
-    lim["met"] = cc.violation <= 1e-9;
+    lim["met"] = cc.what.empty();
     if (!cc.what.empty()) lim["violated"] = cc.what;
     tool["constraints"] = lim;
   }

@@ -164,15 +164,15 @@ TEST_CASE("closest points equal brute force on a 13k-face envelope at the distan
 }
 
 TEST_CASE("the batch call equals brute force bit for bit on dense queries, each started from the last answer, on 1 and 2 threads") {
-  // 4000 queries on 2,000 faces: in Morton order consecutive queries share faces and leaves, so the
+  // 2000 queries on 2,000 faces: in Morton order consecutive queries share faces and leaves, so the
   // search mostly starts from the previous answer's leaf; vertices and edge midpoints add ties.
   const EnvelopeGrid g = envelope_grid(analytic_motion({}), cone_profile(6, 9), 20, 50, 1);
   const TriMesh mesh = transformed(g.mesh, unit_diagonal_frame(g.mesh));
   const SurfaceIndex index(mesh);
   for (double offset : {0.0, 0.01, 0.05}) {
     CAPTURE(offset);
-    std::vector<Eigen::Vector3d> queries = offset_points(mesh, offset, 4000, 41);
-    for (size_t f = 0; f < mesh.faces.size(); f += 7) {
+    std::vector<Eigen::Vector3d> queries = offset_points(mesh, offset, 2000, 41);
+    for (size_t f = 0; f < mesh.faces.size(); f += 14) {
       queries.push_back(mesh.vertices[size_t(mesh.faces[f][0])]);
       queries.push_back(0.5 * (mesh.vertices[size_t(mesh.faces[f][1])] + mesh.vertices[size_t(mesh.faces[f][2])]));
     }
@@ -297,7 +297,7 @@ TEST_CASE("the batch call equals brute force where faces that share no corner ar
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> u(0, 1);
   std::vector<Eigen::Vector3d> queries;
-  for (int k = 0; k < 6000; ++k) {
+  for (int k = 0; k < 2400; ++k) {
     // On a face (either sheet), or between the sheets at any height.
     const auto& F = mesh.faces[size_t(std::uniform_int_distribution<int>(0, int(mesh.faces.size()) - 1)(rng))];
     double b1 = u(rng), b2 = u(rng);
@@ -307,7 +307,7 @@ TEST_CASE("the batch call equals brute force where faces that share no corner ar
     if (k % 3 == 2) q.z() = 0.35 * u(rng) - 0.02;
     queries.push_back(q);
   }
-  for (size_t v = 0; v < mesh.vertices.size(); v += 5) queries.push_back(mesh.vertices[v]);
+  for (size_t v = 0; v < mesh.vertices.size(); v += 15) queries.push_back(mesh.vertices[v]);
   const auto fast = index.closest(queries);
   int differ = 0, upper = 0, lower = 0;
   const int faces_per_sheet = int(mesh.faces.size()) / 2;
@@ -316,13 +316,14 @@ TEST_CASE("the batch call equals brute force where faces that share no corner ar
     if (fast[i].face != slow.face || fast[i].distance != slow.distance || fast[i].point != slow.point ||
         fast[i].normal != slow.normal || fast[i].on_boundary != slow.on_boundary)
       ++differ;
-    if (i < 6000 && i % 3 == 2) ++(slow.face < faces_per_sheet ? lower : upper);
+    if (i < 2400 && i % 3 == 2) ++(slow.face < faces_per_sheet ? lower : upper);
   }
   CHECK(differ == 0);
   // The queries between the sheets are answered by both sheets, many by a face that shares no
   // corner with the face the query was made on.
-  CHECK(upper > 300);
-  CHECK(lower > 300);
+  MESSAGE("between the sheets: " << lower << " answered by the lower sheet, " << upper << " by the upper");
+  CHECK(upper > 200);
+  CHECK(lower > 200);
 }
 
 namespace {
@@ -389,13 +390,14 @@ TEST_CASE("the cell grid answers as brute force where two sheets are closer than
   const SurfaceIndex index(mesh);
   std::mt19937 rng(9);
   std::uniform_real_distribution<double> u(0, 1);
-  std::vector<Eigen::Vector3d> queries = offset_points(mesh, 0.0, 3000, 8);
-  for (auto q : offset_points(mesh, 0.0, 1000, 10)) queries.push_back(q + Eigen::Vector3d(0, 0, 0.03 * u(rng) - 0.005));
-  for (size_t v = 0; v < mesh.vertices.size(); v += 3) queries.push_back(mesh.vertices[v]);
+  std::vector<Eigen::Vector3d> queries = offset_points(mesh, 0.0, 1500, 8);
+  for (auto q : offset_points(mesh, 0.0, 500, 10)) queries.push_back(q + Eigen::Vector3d(0, 0, 0.03 * u(rng) - 0.005));
+  for (size_t v = 0; v < mesh.vertices.size(); v += 6) queries.push_back(mesh.vertices[v]);
   int other_sheet = 0;
   const int faces_per_sheet = int(mesh.faces.size()) / 2;
-  for (size_t i = 3000; i < 4000; ++i) other_sheet += index.closest_brute_force(queries[i]).face >= faces_per_sheet;
-  CHECK(other_sheet > 100);
+  for (size_t i = 1500; i < 2000; ++i) other_sheet += index.closest_brute_force(queries[i]).face >= faces_per_sheet;
+  MESSAGE(other_sheet << " of 500 queries off the lower sheet are nearest to the upper one");
+  CHECK(other_sheet > 50);
   CHECK(batch_differences(index, queries) == 0);
 }
 

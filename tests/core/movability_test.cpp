@@ -25,7 +25,7 @@ Exact exact_envelope(const char* kind, const RadiusProfile& profile) {
 }
 }  // namespace
 
-TEST_CASE("the true axis of an exact envelope is movable and its best field is the true velocity up to scale") {
+TEST_CASE("the true axis of an exact envelope is movable and its best field is the true velocity up to scale" * doctest::test_suite("heavy")) {
   for (const char* kind : {"twist", "arc", "helix", "s-curve"}) {
     const std::string name = kind;
     CAPTURE(name);

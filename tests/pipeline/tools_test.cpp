@@ -233,6 +233,7 @@ TEST_CASE("a job's tool limits hold on every fitted meridian, and the grinding s
     CHECK(steepest <= 5 + 1e-6);
     const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
     CHECK(j["tool"]["constraints"]["met"] == true);
+    CHECK_FALSE(j["tool"]["constraints"].contains("violated"));
     CHECK(j["coverage"].get<double>() > 0);
     // Grinding sheet: dimensions first, then one row per profile point (z, r, diameter, half angle).
     std::istringstream sheet(pipeline::tool_sheet(run.job, p));

@@ -289,7 +289,7 @@ std::vector<ClReference> wall_cl(const std::function<double(double)>& r, const E
 }
 }  // namespace
 
-TEST_CASE("every shipped machine and dialect: the posted wall pass lies on its CL-data, the planned leads excepted") {
+TEST_CASE("every shipped machine and dialect: the posted wall pass lies on its CL-data, the planned leads excepted" * doctest::test_suite("heavy")) {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cylinder), origin));
   for (const VerifyCase& c : verify_cases()) {
@@ -370,7 +370,7 @@ Posting post_two_tools(const Machine& m, const SurfaceIndex& part, const Eigen::
 }
 }  // namespace
 
-TEST_CASE("a tool change whose swing would cross the part is re-planned: the rotaries turn at a safe Z first") {
+TEST_CASE("a tool change whose swing would cross the part is re-planned: the rotaries turn at a safe Z first" * doctest::test_suite("heavy")) {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cylinder), origin));
   // The change position: X 34 Z 20 (5 mm above the wall's top at A 0) and A -90: turning A there
@@ -438,7 +438,7 @@ TEST_CASE("machine files: tool_change takes joint values by axis name within the
   CHECK_THROWS_WITH_AS((void)load_machine(file), doctest::Contains("B"), MachineError);
 }
 
-TEST_CASE("a part whose coarse twin of the flank stands 0.03 mm proud: judged apart, the cut is held to the design surface and the rest of the part") {
+TEST_CASE("a part whose coarse twin of the flank stands 0.03 mm proud: judged apart, the cut is held to the design surface and the rest of the part" * doctest::test_suite("heavy")) {
   const Eigen::Vector3d origin(30, 10, -5);
   const TriMesh design_mesh = moved(wall(cone), origin);
   const TriMesh twin = moved(wall([](double z) { return cone(z) - 0.03; }), origin);
