@@ -709,7 +709,11 @@ CheckDistance check_distance(const CheckSurface& c, const Eigen::Vector3d& p, co
     // stand proud of Φ, which the cutter touches by construction).
     const bool twin = c.solid_twin && size_t(whole->face) < c.solid_twin->size() && (*c.solid_twin)[size_t(whole->face)];
     const double margin = c.tolerance + (twin ? c.twin_sag : 0.0);
-    sign = (p - whole->point).dot(c.solid->pseudo_normal(*whole)) < -margin ? -1.0 : 1.0;
+    // Inside, the depth is the way out of the whole part, as deep as the point lies behind its nearest
+    // face (Φ's twin included): a sample 0.07 mm behind Φ is 0.07 mm in, pushed back out through Φ,
+    // not as deep as the far side of the blade or the hub (the part without the twin), which the
+    // HECC impeller's Ø6 fits were trimmed for as "cuts" of 4-6 mm and pushed through the blade.
+    if ((p - whole->point).dot(c.solid->pseudo_normal(*whole)) < -margin) return signed_at(*c.solid, p, *whole, -1.0);
   } else {
     // The sign is that of the pseudo-normal at the closest point, except at the part's boundary (where a
     // point in front of a hole is outside though the face normal next to its edge may say otherwise).

@@ -162,7 +162,8 @@ struct CheckProfile {
                                          int rows, int samples_s, bool enclose = false);
 
 // Signed distances of points to the check surface as the cutter's samples are judged (the part
-// without Φ's twin; inside, negative, decided by the whole part when `solid` is given); infinite
+// without Φ's twin; inside, negative, decided by the whole part when `solid` is given, and then as
+// deep as the point lies behind the whole part's nearest face, Φ's twin included); infinite
 // without a part. A sphere of radius R at a point keeps out of the part when its distance >= R - tolerance.
 [[nodiscard]] std::vector<double> cutter_clearances(const CheckSurface& check, const std::vector<Eigen::Vector3d>& points);
 

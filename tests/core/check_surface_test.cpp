@@ -175,6 +175,26 @@ TEST_CASE("the part's twin of the design surface is left out of the check surfac
   CHECK(check_part(thin, phi, 0.01).twin_faces == 32);
 }
 
+TEST_CASE("a point just behind the design surface is as deep as it lies behind it, not as the blade is thick") {
+  // A blade 6 mm thick behind the flank x = 0 (its twin in the part). A cutter sample 0.1 mm behind
+  // Φ gouges it by 0.1 mm: its depth is 0.1, the way out back through Φ, not the 5.9 mm to the far
+  // side of the blade (the part without the twin), as the HECC impeller's Ø6 fits were told.
+  const TriMesh phi_mm = test::grid_mesh(31, 11, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * j, 2.0 * k); });
+  const TriMesh blade = test::box_mesh({-6, 0, 0}, {0, 60, 20}, 4);
+  const SurfaceIndex phi(phi_mm);
+  const CheckPart cp = check_part(blade, phi, 0.01);
+  REQUIRE(cp.twin_faces == 32);
+  const SurfaceIndex part(cp.mesh), solid(blade);
+  CheckSurface c;
+  c.part = &part, c.solid = &solid, c.solid_twin = &cp.twin, c.twin_sag = cp.twin_sag, c.tolerance = 0.01;
+  const std::vector<double> d = cutter_clearances(c, {{-0.1, 30, 10}, {-2, 30, 10}, {-5, 30, 10}, {-0.005, 30, 10}, {1, 30, 10}});
+  CHECK(d[0] == doctest::Approx(-0.1));  // behind Φ: through Φ
+  CHECK(d[1] == doctest::Approx(-2));    // nearer Φ than the far side
+  CHECK(d[2] == doctest::Approx(-1));    // nearer the far side: through it
+  CHECK(d[3] > 0);                       // within the tolerance behind Φ: Φ's to judge, outside the part
+  CHECK(d[4] == doctest::Approx(7));     // in front: the nearest face but the twin (the far side, through the hole)
+}
+
 TEST_CASE("shank and holder keep their clearance from the design surface too: a shank wider than the cutter over a taller flank") {
   // Φ: the flank x = 0, y in [0, 60], z in [0, 100]; the part: the block behind it, whose x = 0 side
   // is Φ's twin (left out of the check surface). The cutter (Ø10, z 5-25) runs along Φ, and above
