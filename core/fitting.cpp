@@ -635,6 +635,27 @@ struct CheckSample {
   bool body = false;     // shank or holder
 };
 
+// The radius of a sphere at each body sample's axis point that encloses the body's slab around it
+// (half the gap to each neighbour, the radius linear between samples): the largest of r_k and
+// hypot(half gap, radius at its middle) on both sides. Two samples at one u are a step in the radius
+// (the holder's face above a narrower shank): each stands for its own side of it, so the shank's
+// last sphere is not grown to the holder's radius (it was: a phantom 6 mm "intrusion" of every
+// holder over a Ø8 shank, which trimmed the HECC impeller's patches).
+std::vector<double> body_reach(const std::vector<Eigen::Vector2d>& body) {
+  std::vector<double> out(body.size());
+  for (size_t k = 0; k < body.size(); ++k) {
+    double rho = body[k].y();
+    for (const size_t nb : {k - 1, k + 1}) {
+      if (nb >= body.size()) continue;  // k - 1 wrapped at k = 0
+      const double gap = std::abs(body[nb].x() - body[k].x());
+      if (!(gap > 0)) continue;
+      rho = std::max(rho, std::hypot(0.5 * gap, 0.5 * (body[k].y() + body[nb].y())));
+    }
+    out[k] = rho;
+  }
+  return out;
+}
+
 // The samples of every row. The cutter has flat ends (the canal surface cut off at the tip and at
 // the shoulder): its spheres that fit between the ends, and rims of 12 points near both ends; then
 // the body (shank, holder) beyond the holder-side end.
@@ -665,6 +686,7 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
     if (!body_at_b) ball_s = 1 - ball_s;
   }
   const int kRim = rim_points;
+  const std::vector<double> body_rho = body_reach(c.body);
   for (int i = 0; i < m; ++i) {
     const double t = double(i) / (m - 1);
     for (int j = 0; j < n; ++j) {
@@ -679,8 +701,10 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
         const double th = 2 * M_PI * k / kRim;
         out.push_back({i, sr, -1, -c.tolerance, tool.d(sr) * (std::cos(th) * u + std::sin(th) * v), tool.d(sr)});
       }
-    for (const Eigen::Vector2d& b : c.body)
-      out.push_back({i, body_at_b ? 1 + b.x() / L : -b.x() / L, -1, b.y() + c.clearance, Eigen::Vector3d::Zero(), b.y(), true});
+    for (size_t k = 0; k < c.body.size(); ++k) {
+      const double u = c.body[k].x(), rho = body_rho[k];
+      out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, rho + c.clearance, Eigen::Vector3d::Zero(), rho, true});
+    }
   }
   return out;
 }
@@ -732,9 +756,84 @@ CheckDistance body_distance(const SurfaceIndex& solid, const Eigen::Vector3d& p,
   return signed_at(solid, p, f, (p - f.point).dot(solid.pseudo_normal(f)) < 0 ? -1.0 : 1.0);
 }
 
+// The point of the body's outline (shank and holder as a solid of revolution: c.body's (u, r) linear
+// between samples, closed by flat faces at both ends) nearest to (u, rho) of the axis' half plane,
+// with the outward normal there and the signed gap (< 0 inside).
+struct BodyPoint {
+  Eigen::Vector2d at = Eigen::Vector2d::Zero(), normal = Eigen::Vector2d::UnitY();
+  double gap = INFINITY;
+};
+BodyPoint body_nearest(const std::vector<Eigen::Vector2d>& body, const Eigen::Vector2d& q) {
+  BodyPoint out;
+  if (body.empty()) return out;
+  std::vector<Eigen::Vector2d> outline{{body.front().x(), 0.0}};
+  outline.insert(outline.end(), body.begin(), body.end());
+  outline.emplace_back(body.back().x(), 0.0);
+  double best = INFINITY;
+  Eigen::Vector2d seg_normal = Eigen::Vector2d::UnitY();
+  for (size_t k = 0; k + 1 < outline.size(); ++k) {
+    const Eigen::Vector2d a = outline[k], e = outline[k + 1] - a;
+    const double len2 = e.squaredNorm();
+    const double f = len2 > 0 ? std::clamp((q - a).dot(e) / len2, 0.0, 1.0) : 0.0;
+    const Eigen::Vector2d x = a + f * e;
+    const double d = (q - x).norm();
+    if (d < best) {
+      best = d, out.at = x;
+      // Walking the outline from the bottom face's centre up the side and back down the top face,
+      // the material is on the right: the outward normal is the direction turned left.
+      if (len2 > 0) seg_normal = Eigen::Vector2d(-e.y(), e.x()).normalized();
+    }
+  }
+  // Inside: between the end faces and below the radius there (at a step, the wider side's).
+  bool inside = false;
+  if (q.x() >= body.front().x() && q.x() <= body.back().x())
+    for (size_t k = 0; k + 1 < body.size() && !inside; ++k) {
+      const Eigen::Vector2d a = body[k], b = body[k + 1];
+      if (q.x() < a.x() || q.x() > b.x()) continue;
+      const double r = b.x() > a.x() ? a.y() + (b.y() - a.y()) * (q.x() - a.x()) / (b.x() - a.x()) : std::max(a.y(), b.y());
+      inside = q.y() <= r;
+    }
+  if (body.size() == 1) inside = false;
+  out.gap = inside ? -best : best;
+  out.normal = best > 1e-12 ? Eigen::Vector2d((inside ? -1.0 : 1.0) * (q - out.at) / best) : seg_normal;
+  return out;
+}
+
+// Shank and holder samples whose axis point lies outside the part: judged exactly at the part point
+// found for it, against the body's outline (body_nearest) instead of the sphere that encloses the
+// body's slab there (at a holder's face that sphere bulges its whole radius below the face, a
+// phantom intrusion over the shank). The sample becomes the outline's point: its axis parameter,
+// its shift off the axis, the clearance as its offset; its distance the gap along g, the body's
+// inward normal there (pushing the body off the part point).
+void resolve_body(const Rails& r, const CheckSurface& c, std::vector<CheckSample>& samples, std::vector<CheckDistance>& dist,
+                  int m) {
+  const double L = std::max(r.length, 1e-12);
+  for (size_t k = 0; k < samples.size(); ++k) {
+    CheckSample& cs = samples[k];
+    CheckDistance& d = dist[k];
+    if (!cs.body || !std::isfinite(d.distance) || d.distance < 0) continue;
+    const double t = double(cs.i) / (m - 1);
+    const bool at_b = cs.s >= 0.5;
+    const Eigen::Vector3d a = r.a.point(t), b = r.b.point(t);
+    const Eigen::Vector3d end = at_b ? b : a, dir = (at_b ? b - a : a - b).normalized();
+    const Eigen::Vector3d v = d.q - end;
+    const double u = v.dot(dir);
+    const Eigen::Vector3d radial_v = v - u * dir;
+    const double rho = radial_v.norm();
+    const Eigen::Vector3d radial = rho > 1e-12 ? Eigen::Vector3d(radial_v / rho) : dir.unitOrthogonal();
+    const BodyPoint bp = body_nearest(c.body, {u, rho});
+    cs.s = at_b ? 1 + bp.at.x() / L : -bp.at.x() / L;
+    cs.shift = bp.at.y() * radial;
+    cs.offset = c.clearance;
+    d.g = -(bp.normal.x() * dir + bp.normal.y() * radial);
+    d.distance = bp.gap;
+  }
+}
+
 // Footpoints of the check samples of one motion on the part: the cutter's on the part without Φ's
-// twin (and on the whole part for the sign), shank and holder on the whole part alone when there is one.
-std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c, const std::vector<CheckSample>& samples,
+// twin (and on the whole part for the sign), shank and holder on the whole part alone when there is one
+// (and resolved to the body's outline, resolve_body, which changes those samples).
+std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c, std::vector<CheckSample>& samples,
                                            int m) {
   std::vector<Eigen::Vector3d> pts;
   pts.reserve(samples.size());
@@ -751,6 +850,7 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
   for (size_t k = 0, i = 0; k < samples.size(); ++k)
     out[k] = on_part(k) ? check_distance(c, pts[k], fps[i++], c.solid ? &whole[k] : nullptr)
                         : body_distance(*c.solid, pts[k], whole[k]);
+  resolve_body(r, c, samples, out, m);
   return out;
 }
 }  // namespace
@@ -795,8 +895,9 @@ CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const Che
   if (enclose) {
     for (CheckSample& cs : samples)
       if (!cs.body && cs.j < 0 && cs.shift.squaredNorm() > 0) cs.offset += rim_sag;
-    // Each sphere grown to enclose its slab of the solid (half the spacing on both sides), so a part
-    // point between two samples cannot come nearer than the samples say.
+    // Each sphere of the cutter grown to enclose its slab of the solid (half the spacing on both
+    // sides), so a part point between two samples cannot come nearer than the samples say (the
+    // body's spheres enclose theirs always, body_reach, in the fit too).
     const double half_s = 0.5 / (samples_s - 1);
     for (CheckSample& cs : samples) {
       if (cs.j >= 0) {
@@ -804,23 +905,6 @@ CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const Che
         const double slab = std::max({d, tool.d(std::max(0.0, cs.s - half_s)), tool.d(std::min(1.0, cs.s + half_s))});
         cs.offset += std::hypot(half_s * L, slab) - d;
       }
-    }
-    std::vector<double> grow(c.body.size());
-    for (size_t k = 0; k < c.body.size(); ++k) {
-      const double du = std::max(k > 0 ? c.body[k].x() - c.body[k - 1].x() : 0.0,
-                                 k + 1 < c.body.size() ? c.body[k + 1].x() - c.body[k].x() : 0.0);
-      double r = c.body[k].y();
-      if (k > 0) r = std::max(r, c.body[k - 1].y());
-      if (k + 1 < c.body.size()) r = std::max(r, c.body[k + 1].y());
-      grow[k] = std::hypot(0.5 * du, r) - c.body[k].y();
-    }
-    // check_samples lists each row's body samples last, in the order of c.body.
-    size_t k = 0;
-    int row = -1;
-    for (CheckSample& cs : samples) {
-      if (!cs.body) continue;
-      if (cs.i != row) row = cs.i, k = 0;
-      cs.offset += grow[k++];
     }
   }
   const std::vector<CheckDistance> dist = check_distances(rails, c, samples, rows);
@@ -974,7 +1058,7 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
       }
       // Check surfaces: one-sided penalties keep the cutter and its body out of the part.
       if (o.check.part) {
-        const std::vector<CheckSample> samples = check_samples(rails, st.tool, o.check, m, n);
+        std::vector<CheckSample> samples = check_samples(rails, st.tool, o.check, m, n);
         const std::vector<CheckDistance> dist = check_distances(rails, o.check, samples, m);
         const double w = w_plane * o.check.weight;
         for (size_t k = 0; k < samples.size(); ++k) {

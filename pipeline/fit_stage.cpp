@@ -37,7 +37,8 @@ PatchSpec unit_spec(const PatchJob& p, const Similarity& frame) {
 }
 
 // Shank and holder beyond the cutter as check-surface samples (u beyond the cutter's end, radius), unit
-// frame: about every half of the smallest radius along their length, at most 64.
+// frame: about every half of the smallest radius along their length, at most 64. Where the radius
+// steps (a holder wider than its shank) both sides of the step are samples at the same u.
 std::vector<Eigen::Vector2d> body_samples(const HolderJob& h, const Similarity& fr) {
   struct Piece {
     double length, r0, r1;
@@ -57,7 +58,8 @@ std::vector<Eigen::Vector2d> body_samples(const HolderJob& h, const Similarity& 
     const int k = std::max(1, int(std::ceil(p.length / step)));
     for (int i = 0; i <= k; ++i) {
       const double f = double(i) / k;
-      if (i == 0 && !out.empty()) continue;  // shared with the previous piece's end
+      // Shared with the previous piece's end unless the radius steps there.
+      if (i == 0 && !out.empty() && std::abs(out.back().y() - fr.length_to_unit(p.r0)) < 1e-12) continue;
       out.emplace_back(fr.length_to_unit(start + f * p.length), fr.length_to_unit(p.r0 + f * (p.r1 - p.r0)));
     }
     start += p.length;

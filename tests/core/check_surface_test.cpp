@@ -237,6 +237,44 @@ TEST_CASE("shank and holder keep their clearance from the design surface too: a 
   CHECK(worst(3.5).first <= 0);
 }
 
+TEST_CASE("a holder wider than its shank is judged by its face, not by balls that bulge below it") {
+  // The upright motion (axis x = 5 mm, cutter z 0-20, Ø10 cylinder), a Ø6 shank z 20-40 and a Ø20
+  // holder z 40-70: the body as the job gives it, both sides of the step at u = 20 mm. A ledge at
+  // x >= 12 (7 mm off the axis: under the holder's rim, 4 mm clear of the shank), from z = 25 (clear
+  // of the cutter) to `top` mm below the holder's face.
+  Setup s;
+  ToolRadius cylinder;
+  cylinder.shape = ToolShape::Cylinder;
+  cylinder.D = {s.fr.length_to_unit(5)};
+  std::vector<Eigen::Vector2d> body;
+  for (int k = 0; k <= 20; k += 2) body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(3));
+  for (int k = 20; k <= 50; k += 2) body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(10));
+  const auto worst = [&](double top) {
+    const SurfaceIndex ledge(to_unit(test::box_mesh({12, -20, 25}, {40, 80, 40 - top}, 4), s.fr));
+    CheckSurface c;
+    c.part = &ledge;
+    c.tolerance = s.fr.length_to_unit(0.005), c.clearance = s.fr.length_to_unit(1.0);
+    c.up = Eigen::Vector3d::UnitZ();
+    c.body = body;
+    double out = -INFINITY;
+    for (const bool enclose : {false, true}) {
+      const CheckProfile p = check_profile(s.initial, cylinder, c, 50, 30, enclose);
+      const auto w = std::max_element(p.intrusion.begin(), p.intrusion.end());
+      CHECK(p.body[size_t(w - p.intrusion.begin())] != 0);
+      out = std::max(out, s.fr.length_to_mm(*w));
+    }
+    return out;
+  };
+  // 4 mm below the face: clear by 3 mm (a ball of the holder's radius at its face reached 10 mm
+  // below it: 2.9 mm "inside" the clearance; the old trim view grew the shank's last ball so).
+  CHECK(worst(4.0) == doctest::Approx(-3.0).epsilon(0.01));
+  // 0.4 mm below the face: 0.6 mm inside the 1 mm clearance, seen by the face.
+  CHECK(worst(0.4) == doctest::Approx(0.6).epsilon(0.01));
+  // Up to 5 mm above the face: 3 mm into the holder's side (7 mm off the axis, radius 10), 4 mm
+  // inside the clearance.
+  CHECK(worst(-5.0) == doctest::Approx(4.0).epsilon(0.01));
+}
+
 TEST_CASE("a shank passing the flank's edge inside the clearance: the cutter is made longer at its holder end" * doctest::test_suite("heavy")) {
   // The blade block behind the flank x = 0 ends at z = 20, where the upright cutter (Ø10, tip at
   // z = 0) ends too; its Ø9.4 shank starts there, 0.3 mm off the block's top edge: inside the 1 mm
@@ -404,32 +442,31 @@ TEST_CASE("a ball end is checked as its ball: shortened less than a flat end ove
   CHECK(tip_z < 2.9);
 }
 
-TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's body samples: trimmed, and the collision check agrees" * doctest::test_suite("heavy")) {
+TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's body samples: seen, trimmed, and the collision check agrees" * doctest::test_suite("heavy")) {
   // The shank (Ø6, z 20-40 over the upright motion) passes a thin fin at z 24.45-24.55 whose edge
   // is 3.99 mm from the axis (clearance 1 mm: 0.01 inside it) for y >= 40. The fit's body samples
-  // (every mm) see it 4.015 mm away, outside the clearance; the trim grows them to enclose their
-  // slabs of the shank (as the collision check samples it) and stops the motion before the fin.
+  // (every mm) are 4.015 mm from it, outside a ball's clearance; judged at the fin's point against
+  // the shank's outline, 0.01 mm inside it, and the motion stops before the fin.
   Setup s;
   const TriMesh fin_mm = test::box_mesh({8.99, 40, 24.45}, {30, 80, 24.55}, 2);
   const SurfaceIndex fin(to_unit(fin_mm, s.fr)), fin_index_mm(fin_mm);
   PatchOptions po = s.checked_options(fin);
-  // A shank of 20 mm here (the fit's samples are balls: the holder's, Ø22 with the clearance,
-  // would reach down to the fin from a 10 mm shank's end).
+  // A shank of 20 mm here, as the collision check below has it.
   for (int k = 0; k <= 40; ++k) po.fit.check.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(k <= 20 ? 3.0 : 10.0));
   const PatchSpec spec = s.upright();
   const auto collisions = [&](const PatchFit& f) { return collisions_mm(s, f, fin_index_mm, 20); };
   PatchOptions free = po;
   free.fit.check = {};
   const PatchFit g = fit_patch(s.phi, spec, free);
-  // Unchecked, the motion runs on to y = 50: the shank passes the fin 0.99 mm off, and the fit's own
-  // samples (not grown) call every row clear.
+  // Unchecked, the motion runs on to y = 50: the shank passes the fin 0.99 mm off, and both the fit's
+  // own samples and the trim's denser ones see it 0.01 mm inside the clearance.
   const CollisionReport before = collisions(g);
   REQUIRE_FALSE(before.clear());
   CHECK(before.intervals.front().component == Component::Shank);
   const CheckProfile coarse = check_profile(g.fit.rails, g.fit.tool, po.fit.check, 50, po.fit.samples_s);
-  CHECK(*std::max_element(coarse.intrusion.begin(), coarse.intrusion.end()) <= 0);
+  CHECK(s.fr.length_to_mm(*std::max_element(coarse.intrusion.begin(), coarse.intrusion.end())) == doctest::Approx(0.01).epsilon(0.05));
   const CheckProfile grown = check_profile(g.fit.rails, g.fit.tool, po.fit.check, 50, po.fit.samples_s, true);
-  CHECK(*std::max_element(grown.intrusion.begin(), grown.intrusion.end()) > 0);
+  CHECK(s.fr.length_to_mm(*std::max_element(grown.intrusion.begin(), grown.intrusion.end())) == doctest::Approx(0.01).epsilon(0.05));
   // Checked: trimmed before the fin (the shank's circle keeps 1 mm from the fin's corner at y = 40),
   // and the collision check finds nothing on what is left.
   const PatchFit f = fit_patch(s.phi, spec, po);
