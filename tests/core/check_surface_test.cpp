@@ -265,14 +265,19 @@ TEST_CASE("a holder wider than its shank is judged by its face, not by balls tha
     }
     return out;
   };
-  // 4 mm below the face: clear by 3 mm (a ball of the holder's radius at its face reached 10 mm
-  // below it: 2.9 mm "inside" the clearance; the old trim view grew the shank's last ball so).
-  CHECK(worst(4.0) == doctest::Approx(-3.0).epsilon(0.01));
-  // 0.4 mm below the face: 0.6 mm inside the 1 mm clearance, seen by the face.
-  CHECK(worst(0.4) == doctest::Approx(0.6).epsilon(0.01));
+  // The clearance is kept with the sag of the spacing of the sample that found the point in hand:
+  // hypot(1, 3) - 3 = 0.162 mm on the shank, hypot(1, 10) - 10 = 0.050 on the holder (every 2 mm).
+  const double shank_bulge = std::hypot(1.0, 3.0) - 3, holder_bulge = std::hypot(1.0, 10.0) - 10;
+  // 4 mm below the face: clear by 4 mm of both shank and face, 3 mm beyond the clearance (a ball of
+  // the holder's radius at its face reached 10 mm below it: 2.9 mm "inside" the clearance; the old
+  // trim view grew the shank's last ball so).
+  CHECK(worst(4.0) == doctest::Approx(-3.0 + shank_bulge).epsilon(0.01));
+  // 0.4 mm below the face: 0.6 mm inside the 1 mm clearance, seen by the face (the shank's last
+  // sample finds the ledge's edge).
+  CHECK(worst(0.4) == doctest::Approx(0.6 + shank_bulge).epsilon(0.01));
   // Up to 5 mm above the face: 3 mm into the holder's side (7 mm off the axis, radius 10), 4 mm
   // inside the clearance.
-  CHECK(worst(-5.0) == doctest::Approx(4.0).epsilon(0.01));
+  CHECK(worst(-5.0) == doctest::Approx(4.0 + holder_bulge).epsilon(0.01));
 }
 
 TEST_CASE("a shank passing the flank's edge inside the clearance: the cutter is made longer at its holder end" * doctest::test_suite("heavy")) {
@@ -459,14 +464,15 @@ TEST_CASE("a fin 0.01 mm inside the shank's clearance, between two of the fit's 
   free.fit.check = {};
   const PatchFit g = fit_patch(s.phi, spec, free);
   // Unchecked, the motion runs on to y = 50: the shank passes the fin 0.99 mm off, and both the fit's
-  // own samples and the trim's denser ones see it 0.01 mm inside the clearance.
+  // own samples and the trim's denser ones see it 0.01 mm inside the clearance, plus the sag of the
+  // samples' spacing kept in hand (hypot(0.5, 3) - 3 = 0.041 mm).
   const CollisionReport before = collisions(g);
   REQUIRE_FALSE(before.clear());
   CHECK(before.intervals.front().component == Component::Shank);
   const CheckProfile coarse = check_profile(g.fit.rails, g.fit.tool, po.fit.check, 50, po.fit.samples_s);
-  CHECK(s.fr.length_to_mm(*std::max_element(coarse.intrusion.begin(), coarse.intrusion.end())) == doctest::Approx(0.01).epsilon(0.05));
+  CHECK(s.fr.length_to_mm(*std::max_element(coarse.intrusion.begin(), coarse.intrusion.end())) == doctest::Approx(0.01 + std::hypot(0.5, 3.0) - 3).epsilon(0.02));
   const CheckProfile grown = check_profile(g.fit.rails, g.fit.tool, po.fit.check, 50, po.fit.samples_s, true);
-  CHECK(s.fr.length_to_mm(*std::max_element(grown.intrusion.begin(), grown.intrusion.end())) == doctest::Approx(0.01).epsilon(0.05));
+  CHECK(s.fr.length_to_mm(*std::max_element(grown.intrusion.begin(), grown.intrusion.end())) == doctest::Approx(0.01 + std::hypot(0.5, 3.0) - 3).epsilon(0.02));
   // Checked: trimmed before the fin (the shank's circle keeps 1 mm from the fin's corner at y = 40),
   // and the collision check finds nothing on what is left.
   const PatchFit f = fit_patch(s.phi, spec, po);
