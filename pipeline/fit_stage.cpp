@@ -36,37 +36,6 @@ PatchSpec unit_spec(const PatchJob& p, const Similarity& frame) {
   return s;
 }
 
-// Shank and holder beyond the cutter as check-surface samples (u beyond the cutter's end, radius), unit
-// frame: about every half of the smallest radius along their length, at most 64. Where the radius
-// steps (a holder wider than its shank) both sides of the step are samples at the same u.
-std::vector<Eigen::Vector2d> body_samples(const HolderJob& h, const Similarity& fr) {
-  struct Piece {
-    double length, r0, r1;
-  };
-  const std::vector<Piece> pieces{{h.shank_length, h.shank_diameter / 2, h.shank_diameter / 2},
-                                  {h.length, h.diameter / 2, h.diameter_far / 2},
-                                  {h.cylinder_length, h.diameter_far / 2, h.diameter_far / 2}};
-  double total = 0, r_min = INFINITY;
-  for (const Piece& p : pieces)
-    if (p.length > 0) total += p.length, r_min = std::min({r_min, p.r0, p.r1});
-  std::vector<Eigen::Vector2d> out;
-  if (!(total > 0)) return out;
-  const double step = std::max(0.5 * r_min, total / 64);
-  double start = 0;
-  for (const Piece& p : pieces) {
-    if (!(p.length > 0)) continue;
-    const int k = std::max(1, int(std::ceil(p.length / step)));
-    for (int i = 0; i <= k; ++i) {
-      const double f = double(i) / k;
-      // Shared with the previous piece's end unless the radius steps there.
-      if (i == 0 && !out.empty() && std::abs(out.back().y() - fr.length_to_unit(p.r0)) < 1e-12) continue;
-      out.emplace_back(fr.length_to_unit(start + f * p.length), fr.length_to_unit(p.r0 + f * (p.r1 - p.r0)));
-    }
-    start += p.length;
-  }
-  return out;
-}
-
 // (z, r) points of the unit frame in mm.
 std::vector<Eigen::Vector2d> profile_mm(const Similarity& fr, std::vector<Eigen::Vector2d> zr) {
   for (Eigen::Vector2d& p : zr) p *= fr.length_to_mm(1.0);
@@ -102,6 +71,35 @@ nlohmann::ordered_json error_report(const ErrorStats& e, const Similarity& frame
           {"histogram", h}};
 }
 }  // namespace
+
+std::vector<Eigen::Vector2d> body_samples(const HolderJob& h, const Similarity& fr) {
+  struct Piece {
+    double length, r0, r1;
+  };
+  const std::vector<Piece> pieces{{h.shank_length, h.shank_diameter / 2, h.shank_diameter / 2},
+                                  {h.length, h.diameter / 2, h.diameter_far / 2},
+                                  {h.cylinder_length, h.diameter_far / 2, h.diameter_far / 2}};
+  double total = 0, r_min = INFINITY;
+  for (const Piece& p : pieces)
+    if (p.length > 0) total += p.length, r_min = std::min({r_min, p.r0, p.r1});
+  std::vector<Eigen::Vector2d> out;
+  if (!(total > 0)) return out;
+  const double step = std::max(0.5 * r_min, total / 64);
+  double start = 0;
+  for (const Piece& p : pieces) {
+    if (!(p.length > 0)) continue;
+    const int k = std::max(1, int(std::ceil(p.length / step)));
+    for (int i = 0; i <= k; ++i) {
+      const double f = double(i) / k;
+      // Shared with the previous piece's end unless the radius steps there.
+      if (i == 0 && !out.empty() && std::abs(out.back().y() - fr.length_to_unit(p.r0)) < 1e-12) continue;
+      out.emplace_back(fr.length_to_unit(start + f * p.length), fr.length_to_unit(p.r0 + f * (p.r1 - p.r0)));
+    }
+    start += p.length;
+  }
+  return out;
+}
+
 
 namespace {
 ToolAssembly assembly_of(const Job& job, const Similarity& fr, const FitResult& r) {

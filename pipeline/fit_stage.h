@@ -107,6 +107,11 @@ inline const std::string cover_deviation_svg_name = "surface-deviation.svg";
 
 [[nodiscard]] FittedJob fit_job(const Job& job, int threads, const Progress& progress);
 
+// The job's shank and holder as the fit's check-surface body (CheckSurface::body): (u beyond the
+// cutter's end, radius) in the frame `fr`, about every half of the smallest radius (at most 64
+// samples); where the radius steps (a holder wider than its shank) both sides are samples at one u.
+[[nodiscard]] std::vector<Eigen::Vector2d> body_samples(const HolderJob& holder, const Similarity& fr);
+
 // Poses in mm, tool assembly, meridian, contact points and the collision and gouge checks of
 // every fitted patch against the whole part (job.part, default the design surface).
 void check_job(const Job& job, FittedJob& fitted, const Progress& progress);

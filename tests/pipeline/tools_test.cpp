@@ -7,6 +7,7 @@
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <map>
 #include <sstream>
@@ -15,6 +16,7 @@
 #include "core/errors.h"
 #include "core/machined_surface.h"
 #include "pipeline/data_dir.h"
+#include "pipeline/fit_stage.h"
 #include "pipeline/run.h"
 #include "pipeline/tool_catalogue.h"
 #include "postproc/gcode.h"
@@ -65,6 +67,37 @@ std::string tools_error_of(const test::ScratchDir& dir, const std::string& yaml)
   return test::job_error(dir.file("job.yaml"));
 }
 }  // namespace
+
+TEST_CASE("the holder's body for the fit: both sides of the step over a narrower shank, piece ends exact") {
+  // Shank Ø8 over 30 mm, holder Ø20 -> Ø40 over 40 mm, then Ø40 over 10 mm (frame: mm).
+  pipeline::HolderJob h;
+  h.shank_length = 30, h.shank_diameter = 8, h.length = 40, h.diameter = 20, h.diameter_far = 40, h.cylinder_length = 10;
+  const std::vector<Eigen::Vector2d> b = pipeline::body_samples(h, Similarity{});
+  REQUIRE(b.size() >= 3);
+  CHECK(b.front().x() == 0.0);
+  CHECK(b.front().y() == 4.0);
+  CHECK(b.back().x() == doctest::Approx(80.0));
+  CHECK(b.back().y() == doctest::Approx(20.0));
+  // The step at u = 30: the shank's end (r 4) and the holder's face (r 10), one sample each.
+  int at_step = 0;
+  bool shank_end = false, holder_face = false;
+  for (const Eigen::Vector2d& p : b)
+    if (std::abs(p.x() - 30) < 1e-12) {
+      ++at_step;
+      shank_end |= std::abs(p.y() - 4) < 1e-12;
+      holder_face |= std::abs(p.y() - 10) < 1e-12;
+    }
+  CHECK(at_step == 2);
+  CHECK(shank_end);
+  CHECK(holder_face);
+  // Where the cone meets the cylinder the radius is continuous: one sample at u = 70.
+  CHECK(std::count_if(b.begin(), b.end(), [](const Eigen::Vector2d& p) { return std::abs(p.x() - 70) < 1e-12; }) == 1);
+  // u never decreases; the samples are at most 2 mm apart (half the shank's radius; 80 / 64 is less).
+  for (size_t k = 1; k < b.size(); ++k) {
+    CHECK(b[k].x() >= b[k - 1].x());
+    CHECK(b[k].x() - b[k - 1].x() <= 2.0 + 1e-9);
+  }
+}
 
 TEST_CASE("the shipped tool catalogue reads: five families, standard sizes, flanks off the axis") {
   const std::vector<pipeline::CatalogueTool> all = pipeline::read_catalogue(pipeline::tools_dir());
