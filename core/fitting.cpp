@@ -766,7 +766,7 @@ CheckDistance body_distance(const SurfaceIndex& solid, const Eigen::Vector3d& p,
 }
 
 // The point of the body's outline (shank and holder as a solid of revolution: c.body's (u, r) linear
-// between samples, closed by flat faces at both ends) nearest to (u, rho) of the axis' half plane,
+// between samples, closed by a flat face at the far end) nearest to (u, rho) of the axis' half plane,
 // with the outward normal there and the signed gap (< 0 inside).
 struct BodyPoint {
   Eigen::Vector2d at = Eigen::Vector2d::Zero(), normal = Eigen::Vector2d::UnitY();
@@ -775,8 +775,9 @@ struct BodyPoint {
 BodyPoint body_nearest(const std::vector<Eigen::Vector2d>& body, const Eigen::Vector2d& q) {
   BodyPoint out;
   if (body.empty()) return out;
-  std::vector<Eigen::Vector2d> outline{{body.front().x(), 0.0}};
-  outline.insert(outline.end(), body.begin(), body.end());
+  // No face at the cutter's end: the cutter is there (a part point just past it, inside the shank's
+  // radius, is as deep as its way out through the shank's side, and the cutter's own samples judge it).
+  std::vector<Eigen::Vector2d> outline(body.begin(), body.end());
   outline.emplace_back(body.back().x(), 0.0);
   double best = INFINITY;
   Eigen::Vector2d seg_normal = Eigen::Vector2d::UnitY();
@@ -788,8 +789,8 @@ BodyPoint body_nearest(const std::vector<Eigen::Vector2d>& body, const Eigen::Ve
     const double d = (q - x).norm();
     if (d < best) {
       best = d, out.at = x;
-      // Walking the outline from the bottom face's centre up the side and back down the top face,
-      // the material is on the right: the outward normal is the direction turned left.
+      // Walking the outline up the side from the cutter's end and down the far face, the material is
+      // on the right: the outward normal is the direction turned left.
       if (len2 > 0) seg_normal = Eigen::Vector2d(-e.y(), e.x()).normalized();
     }
   }

@@ -50,9 +50,11 @@ struct ToolRadius {
 // Check surfaces (the part, without the design surface's own region): a fitted tool stays out of
 // them. Unit frame. Every round, samples of the tool's axis are queried against the part: along the
 // cutter (the fit's m x n samples, radius d_j) and along the body beyond it (shank and holder:
-// `body` gives (distance beyond the cutter's end along the axis, radius) of each sample). A sample
-// whose signed distance to the part is below its radius minus `tolerance` (cutter) or plus
-// `clearance` (body) gets a one-sided penalty on the motion and the radii,
+// `body` gives (distance beyond the cutter's end along the axis, radius) of each sample). A cutter
+// sample whose signed distance to the part is below its radius minus `tolerance` gets a one-sided
+// penalty on the motion and the radii; a body sample is judged at the part point found for its axis
+// point against the body's outline (its gap below `clearance` plus the sag of the samples' spacing),
+// or as a ball when its axis point is inside the part:
 //   r = w (R - <p - q, g>),  q the part's closest point, g its outward direction,
 // the same linearisation as eq. (10)'s plane term, so the optimisation tilts or shifts the axis (and
 // narrows the radii) away from the part instead of cutting it.
@@ -72,7 +74,9 @@ struct CheckSurface {
   double twin_sag = 0;
   double tolerance = 0;   // how deep the cutter may enter the part
   double clearance = 0;   // how far shank and holder stay from it
-  std::vector<Eigen::Vector2d> body;  // (u beyond the cutter end, radius), u > 0 increasing
+  // (u beyond the cutter end, radius), u >= 0 not decreasing: two samples at one u are a step in
+  // the radius (a holder's face over a narrower shank), the outline linear between samples.
+  std::vector<Eigen::Vector2d> body;
   // The tool's holder side: the end of the axis segment whose direction from the other end points
   // along `up` (mean over the motion). Unset: the b end (s = 1), the tip is a.
   std::optional<Eigen::Vector3d> up;
