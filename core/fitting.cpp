@@ -636,23 +636,28 @@ struct CheckSample {
   double grow = 0;       // body: the sag of its spacing, hypot(half gap, r) - r, kept in hand
 };
 
-// The radius of a sphere at each body sample's axis point that encloses the body's slab around it
-// (half the gap to each neighbour, the radius linear between samples): the largest of r_k and
-// hypot(half gap, radius at its middle) on both sides. Two samples at one u are a step in the radius
-// (the holder's face above a narrower shank): each stands for its own side of it, so the shank's
-// last sphere is not grown to the holder's radius (it was: a phantom 6 mm "intrusion" of every
-// holder over a Ø8 shank, which trimmed the HECC impeller's patches).
-std::vector<double> body_reach(const std::vector<Eigen::Vector2d>& body) {
-  std::vector<double> out(body.size());
+// Per body sample: the radius of a sphere at its axis point that encloses the body's slab around it
+// (half the gap to each neighbour, the radius linear between samples: the largest of r_k and
+// hypot(half gap, radius at its middle) on both sides), and the sag of its spacing,
+// hypot(half the larger gap, r_k) - r_k. Two samples at one u are a step in the radius (the holder's
+// face above a narrower shank): each stands for its own side of it, so the shank's last sphere is
+// not grown to the holder's radius (it was: a phantom 6 mm "intrusion" of every holder over a Ø8
+// shank, which trimmed the HECC impeller's patches).
+struct BodySphere {
+  double reach = 0, sag = 0;
+};
+std::vector<BodySphere> body_spheres(const std::vector<Eigen::Vector2d>& body) {
+  std::vector<BodySphere> out(body.size());
   for (size_t k = 0; k < body.size(); ++k) {
-    double rho = body[k].y();
+    double rho = body[k].y(), widest = 0;
     for (const size_t nb : {k - 1, k + 1}) {
       if (nb >= body.size()) continue;  // k - 1 wrapped at k = 0
       const double gap = std::abs(body[nb].x() - body[k].x());
+      widest = std::max(widest, gap);
       if (!(gap > 0)) continue;
       rho = std::max(rho, std::hypot(0.5 * gap, 0.5 * (body[k].y() + body[nb].y())));
     }
-    out[k] = rho;
+    out[k] = {rho, std::hypot(0.5 * widest, body[k].y()) - body[k].y()};
   }
   return out;
 }
@@ -687,14 +692,7 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
     if (!body_at_b) ball_s = 1 - ball_s;
   }
   const int kRim = rim_points;
-  const std::vector<double> body_rho = body_reach(c.body);
-  std::vector<double> body_sag(c.body.size(), 0.0);
-  for (size_t k = 0; k < c.body.size(); ++k) {
-    double gap = 0;
-    if (k > 0) gap = std::max(gap, c.body[k].x() - c.body[k - 1].x());
-    if (k + 1 < c.body.size()) gap = std::max(gap, c.body[k + 1].x() - c.body[k].x());
-    body_sag[k] = std::hypot(0.5 * gap, c.body[k].y()) - c.body[k].y();
-  }
+  const std::vector<BodySphere> spheres = body_spheres(c.body);
   for (int i = 0; i < m; ++i) {
     const double t = double(i) / (m - 1);
     for (int j = 0; j < n; ++j) {
@@ -710,9 +708,9 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
         out.push_back({i, sr, -1, -c.tolerance, tool.d(sr) * (std::cos(th) * u + std::sin(th) * v), tool.d(sr)});
       }
     for (size_t k = 0; k < c.body.size(); ++k) {
-      const double u = c.body[k].x(), rho = body_rho[k];
+      const double u = c.body[k].x(), rho = spheres[k].reach;
       out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, rho + c.clearance, Eigen::Vector3d::Zero(), rho, true,
-                     body_sag[k]});
+                     spheres[k].sag});
     }
   }
   return out;
@@ -911,7 +909,7 @@ CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const Che
       if (!cs.body && cs.j < 0 && cs.shift.squaredNorm() > 0) cs.offset += rim_sag;
     // Each sphere of the cutter grown to enclose its slab of the solid (half the spacing on both
     // sides), so a part point between two samples cannot come nearer than the samples say (the
-    // body's spheres enclose theirs always, body_reach, in the fit too).
+    // body's balls enclose theirs always, body_spheres, in the fit too).
     const double half_s = 0.5 / (samples_s - 1);
     for (CheckSample& cs : samples) {
       if (cs.j >= 0) {

@@ -100,7 +100,6 @@ std::vector<Eigen::Vector2d> body_samples(const HolderJob& h, const Similarity& 
   return out;
 }
 
-
 namespace {
 ToolAssembly assembly_of(const Job& job, const Similarity& fr, const FitResult& r) {
   ToolAssembly a;
