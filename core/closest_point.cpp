@@ -1043,6 +1043,156 @@ Footpoint SurfaceIndex::closest_brute_force(const Eigen::Vector3d& p) const {
 }
 
 namespace {
+// The closest point to p of the triangle (a, b, c) clipped to the slab lo <= <x, n> <= hi
+// (Sutherland-Hodgman against both planes, then the nearest of the clipped polygon's fan); false
+// when the triangle misses the slab. A triangle inside the slab is answered as closest() answers it.
+bool closest_on_clipped(const Eigen::Vector3d& p, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                        const Eigen::Vector3d& c, const Eigen::Vector3d& n, double lo, double hi, Eigen::Vector3d& out) {
+  const double ha = n.dot(a), hb = n.dot(b), hc = n.dot(c);
+  if (std::max({ha, hb, hc}) < lo || std::min({ha, hb, hc}) > hi) return false;
+  if (std::min({ha, hb, hc}) >= lo && std::max({ha, hb, hc}) <= hi) {
+    out = closest_on_triangle(p, a, b, c).point;
+    return true;
+  }
+  std::array<Eigen::Vector3d, 5> poly{a, b, c}, next;
+  int count = 3;
+  for (const double sign : {1.0, -1.0}) {  // keep sign * (<x, n> - level) >= 0
+    const double level = sign > 0 ? lo : hi;
+    int kept = 0;
+    for (int i = 0; i < count; ++i) {
+      const Eigen::Vector3d& u = poly[size_t(i)];
+      const Eigen::Vector3d& v = poly[size_t((i + 1) % count)];
+      const double du = sign * (n.dot(u) - level), dv = sign * (n.dot(v) - level);
+      if (du >= 0) next[size_t(kept++)] = u;
+      if ((du >= 0) != (dv >= 0) && du != dv) next[size_t(kept++)] = u + (du / (du - dv)) * (v - u);
+    }
+    poly = next;
+    count = kept;
+    if (count == 0) return false;
+  }
+  if (count < 3) {
+    out = closest_on_triangle(p, poly[0], poly[size_t(count - 1)], poly[size_t(count - 1)]).point;
+    return true;
+  }
+  double best = std::numeric_limits<double>::infinity();
+  for (int i = 1; i + 1 < count; ++i) {
+    const Eigen::Vector3d q = closest_on_triangle(p, poly[0], poly[size_t(i)], poly[size_t(i + 1)]).point;
+    const double d2 = (q - p).squaredNorm();
+    if (d2 < best) best = d2, out = q;
+  }
+  return true;
+}
+
+// Barycentric coordinates of x (in the plane of the face, or projected onto it) in (a, b, c).
+Eigen::Vector3d barycentric_of(const Eigen::Vector3d& x, const Eigen::Vector3d& a, const Eigen::Vector3d& b,
+                               const Eigen::Vector3d& c) {
+  const Eigen::Vector3d v0 = b - a, v1 = c - a, v2 = x - a;
+  const double d00 = v0.dot(v0), d01 = v0.dot(v1), d11 = v1.dot(v1), d20 = v2.dot(v0), d21 = v2.dot(v1);
+  const double den = d00 * d11 - d01 * d01;
+  if (!(std::abs(den) > 1e-300)) return {1, 0, 0};
+  const double v = (d11 * d20 - d01 * d21) / den, w = (d00 * d21 - d01 * d20) / den;
+  return {1 - v - w, v, w};
+}
+}  // namespace
+
+Footpoint SurfaceIndex::closest_in_slab(const Eigen::Vector3d& p, const Eigen::Vector3d& direction, double lo,
+                                        double hi) const {
+  if (!p.allFinite() || !direction.allFinite() || !(lo <= hi) || p.cwiseAbs().maxCoeff() > 1e30)
+    return closest_in_slab_brute_force(p, direction, lo, hi);
+  const Impl& s = *impl_;
+  const Eigen::Vector3d n = direction.normalized();
+  const int nf = int(s.mesh.faces.size());
+  if (nf == 0) return no_footpoint();
+  const float x = float(p.x()), y = float(p.y()), z = float(p.z());
+  const float margin = float(kFloatError * (std::abs(p.x()) + std::abs(p.y()) + std::abs(p.z())));
+  double best2 = std::numeric_limits<double>::infinity();
+  int face = -1, slot = -1;
+  Eigen::Vector3d at = Eigen::Vector3d::Zero();
+  float prune2 = INFINITY;
+  const auto bound = [&](double b2) {  // as in Impl::search: pruned only beyond the rounding slack
+    const double b = std::sqrt(b2) + s.slack;
+    const double r2 = b * b * (1 + 1e-12) * (1 + kFrameError) * (1 + kFloatError);
+    return r2 < 1e38 ? float(r2) * (1.0F + 0x1p-22F) : INFINITY;
+  };
+  const auto visit_leaf = [&](int first, int count) {
+    for (int j = 0; j < count; ++j) {
+      const LeafFace& T = s.tri[size_t(first + j)];
+      Eigen::Vector3d q;
+      if (!closest_on_clipped(p, T.a, T.b, T.c, n, lo, hi, q)) continue;
+      if (closer((q - p).squaredNorm(), T.face, best2, face)) {
+        slot = first + j, at = q;
+        prune2 = bound(best2);
+      }
+    }
+  };
+  // A child box is left out when its extent along n (the box's centre and half extents in its own
+  // frame, projected; widened by the frame's rounding) misses the slab.
+  const auto meets_slab = [&](const Node4& w, int j) {
+    double centre = 0, half = 0, size = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double c = n.x() * w.R[3 * k][j] + n.y() * w.R[3 * k + 1][j] + n.z() * w.R[3 * k + 2][j];
+      centre += c * w.m[k][j];
+      half += std::abs(c) * w.e[k][j];
+      size += std::abs(w.m[k][j]) + w.e[k][j];
+    }
+    const double pad = 1e-5 * size + 2 * s.slack;
+    return centre + half + pad >= lo && centre - half - pad <= hi;
+  };
+  struct Entry {
+    int link;
+    float d2;
+  };
+  std::vector<Entry> stack{{0, 0.0F}};
+  if (s.wide.empty()) visit_leaf(0, std::min(kLeafFaces, nf));
+  while (!s.wide.empty() && !stack.empty()) {
+    const Entry en = stack.back();
+    stack.pop_back();
+    if (en.d2 > prune2) continue;
+    if (en.link < 0) {
+      visit_leaf((~en.link) >> 3, (~en.link) & 7);
+      continue;
+    }
+    const Node4& w = s.wide[size_t(en.link)];
+    alignas(16) float d2[4], key[4];
+    bound4(w, x, y, z, margin, d2, key);
+    int order[4], m = 0;
+    for (int j = 0; j < 4; ++j) {
+      if (w.link[j] == kEmptyLane || !(d2[j] <= prune2) || !meets_slab(w, j)) continue;
+      int i = m++;
+      for (; i > 0 && d2[j] < d2[order[i - 1]]; --i) order[i] = order[i - 1];
+      order[i] = j;
+    }
+    for (int i = m - 1; i >= 0; --i) stack.push_back({w.link[order[i]], d2[order[i]]});
+  }
+  if (face < 0) return no_footpoint();
+  const LeafFace& T = s.tri[size_t(slot)];
+  return s.make_footpoint(p, face, {at, barycentric_of(at, T.a, T.b, T.c)}, T.boundary);
+}
+
+Footpoint SurfaceIndex::closest_in_slab_brute_force(const Eigen::Vector3d& p, const Eigen::Vector3d& direction, double lo,
+                                                    double hi) const {
+  const Impl& s = *impl_;
+  if (!p.allFinite() || !direction.allFinite() || !(lo <= hi)) return no_footpoint();
+  const Eigen::Vector3d n = direction.normalized();
+  double best2 = std::numeric_limits<double>::infinity();
+  int face = -1;
+  Eigen::Vector3d at = Eigen::Vector3d::Zero();
+  for (int f = 0; f < int(s.mesh.faces.size()); ++f) {
+    const auto& F = s.mesh.faces[size_t(f)];
+    Eigen::Vector3d q;
+    if (!closest_on_clipped(p, s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])], s.mesh.vertices[size_t(F[2])], n,
+                            lo, hi, q))
+      continue;
+    if (closer((q - p).squaredNorm(), f, best2, face)) at = q;
+  }
+  if (face < 0) return no_footpoint();
+  const auto& F = s.mesh.faces[size_t(face)];
+  const TrianglePoint tp{at, barycentric_of(at, s.mesh.vertices[size_t(F[0])], s.mesh.vertices[size_t(F[1])],
+                                            s.mesh.vertices[size_t(F[2])])};
+  return s.make_footpoint(p, face, tp, s.boundary_flags(face));
+}
+
+namespace {
 // The face across each edge (corners k, k+1) of every face: the one other face with that edge, or -1
 // (a boundary edge, or one shared by more than two faces).
 std::vector<std::array<int, 3>> faces_across(const TriMesh& m) {

@@ -53,6 +53,17 @@ class SurfaceIndex {
   [[nodiscard]] std::vector<Footpoint> closest(const std::vector<Eigen::Vector3d>& points) const;
   // Brute force over all triangles; the reference the tests compare against (same tie rule).
   [[nodiscard]] Footpoint closest_brute_force(const Eigen::Vector3d& p) const;
+  // The closest point to p among the mesh's points x in the slab lo <= <x, direction> <= hi
+  // (direction unit): the faces clipped to the slab. The footpoint's face, point, distance and
+  // barycentric coordinates (of the point in the whole face); no face (as for a query that is not
+  // finite) when no face meets the slab. A solid of revolution about `direction` judged slab by
+  // slab (shank and holder against the part) sees in each slab its own nearest part point, not a
+  // nearer one beside a narrower part of the body that hides a farther one entering a wider part.
+  [[nodiscard]] Footpoint closest_in_slab(const Eigen::Vector3d& p, const Eigen::Vector3d& direction, double lo,
+                                          double hi) const;
+  // The same by brute force over all faces (the tests' reference).
+  [[nodiscard]] Footpoint closest_in_slab_brute_force(const Eigen::Vector3d& p, const Eigen::Vector3d& direction,
+                                                      double lo, double hi) const;
 
   [[nodiscard]] const TriMesh& mesh() const;
   [[nodiscard]] const std::vector<Eigen::Vector3d>& normals() const;  // per vertex

@@ -79,15 +79,58 @@ double body_radius(const ToolAssembly& t, double z, Component* which) {
   return 0.5 * t.holder_diameter_far;
 }
 
+// The signed gap between a point at height z above the tip and rho off the axis and the body (shank
+// and holder as one solid of revolution), and the component there. Inside, the radial depth
+// (< 0). Outside, below the cutter's end, the distance to the shank's end (the cutter's own samples
+// judge the cutter); from there up the exact distance to the body's outline: the shank's side, the
+// holder's face, its cone and cylinder, its far end (a point under the holder's face beside the
+// shank is as far as the face, not as far as the shank).
+double body_gap(const ToolAssembly& t, double z, double rho, Component* which) {
+  const double L = t.cutter_length(), total = t.total_length();
+  const double eps = 1e-9 * (1 + total);
+  if (z < L - eps) {
+    const double r = body_radius(t, L, which);
+    return rho <= r ? L - z : std::hypot(L - z, rho - r);
+  }
+  const double z1 = L + t.shank_length, z2 = z1 + t.holder_length;
+  const bool holder = t.holder_length + t.holder_cylinder_length > 0;
+  const double rs = 0.5 * t.shank_diameter;
+  std::vector<std::pair<Eigen::Vector2d, Component>> outline{{{L, rs}, Component::Shank}};
+  if (t.shank_length > 0) outline.push_back({{z1, rs}, Component::Shank});
+  if (holder) {
+    outline.push_back({{z1, 0.5 * t.holder_diameter}, Component::Holder});
+    if (t.holder_length > 0) outline.push_back({{z2, 0.5 * t.holder_diameter_far}, Component::Holder});
+    outline.push_back({{total, 0.5 * t.holder_diameter_far}, Component::Holder});
+  }
+  outline.push_back({{total, 0.0}, outline.back().second});
+  if (z <= total + eps) {
+    const double r = body_radius(t, std::clamp(z, L, std::nextafter(total, 0.0)), which);
+    if (rho <= r) return rho - r;
+  }
+  const Eigen::Vector2d q(z, rho);
+  double best = INFINITY;
+  *which = Component::Shank;
+  for (size_t k = 0; k + 1 < outline.size(); ++k) {
+    const Eigen::Vector2d a = outline[k].first, e = outline[k + 1].first - a;
+    const double len2 = e.squaredNorm();
+    const double f = len2 > 0 ? std::clamp((q - a).dot(e) / len2, 0.0, 1.0) : 0.0;
+    const double d = (q - a - f * e).norm();
+    if (d < best) best = d, *which = outline[k + 1].second;
+  }
+  return best;
+}
+
 struct Sample {
   double z, reach;  // axial position; a part point farther than `reach` from the axis point cannot matter
   bool cutter;
   double radius;    // cutter: sphere radius there
+  double lo = 0, hi = 0;  // shank and holder: the slab (z from the tip) whose own nearest part point is judged too
 };
 
 struct Hit {
   double depth = -INFINITY;
   Eigen::Vector3d at = Eigen::Vector3d::Zero();
+  Component component = Component::Tool;
 };
 
 }  // namespace
@@ -111,7 +154,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
     if (c.y() >= 0.1 * rmax) rmin = std::min(rmin, c.y());
   const double hc = o.slab_mm > 0 ? o.slab_mm : std::sqrt(2 * rmin * o.gouge_tolerance_mm);
   const double hb = o.slab_mm > 0 ? o.slab_mm : std::max(0.5, 2 * o.clearance_mm);
-  const double sample_count = std::ceil(L / hc) + std::ceil((total - L) / hb) + 3;  // an upper bound
+  double sample_count = std::ceil(L / hc) + std::ceil((total - L) / hb) + 3;  // an upper bound (cones: below)
   if (!(sample_count <= o.max_work))
     throw InputError(fmt::format("collision check: the tool ({:g} mm long) would need {:.0f} axial samples, more than {}: "
                                  "raise the gouge tolerance or the clearance",
@@ -125,16 +168,36 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
       if (std::abs(c.x() - z) <= half) r_slab = std::max(r_slab, c.y());
     samples.push_back({z, std::max(r, std::hypot(half, r_slab)) + o.gouge_tolerance_mm, true, r});
   }
-  // Shank and holder: samples every h from the cutter's end to the holder's end (both included),
-  // each covering the half slabs on both sides with the ball around it.
-  const int nb = total > L ? std::max(1, int(std::ceil((total - L) / hb))) : -1;
-  for (int k = 0; k <= nb; ++k) {
-    const double z = L + (total - L) * k / nb, half = 0.5 * (total - L) / nb;
+  // Shank and holder: between the body's breaks (the cutter's end, the holder's face, the end of
+  // its cone, its far end) samples every h or less, both ends included, a cone's so close that its
+  // radius changes by at most a quarter of the clearance from one to the next; each sample's slab
+  // reaches half way to its neighbours but never past a break, its ball enclosing the slab. Within a
+  // slab the body's nearest part point is the one nearest the axis (up to the slab's sag), and the
+  // samples at the breaks see the rims exactly. The slab, widened by the clearance, is queried for
+  // its own nearest part point besides the whole part's: a nearer part point beside the shank cannot
+  // hide a farther one that enters the holder through its face.
+  std::vector<double> breaks{L};
+  for (const double z : {L + tool.shank_length, L + tool.shank_length + tool.holder_length, total})
+    if (z > breaks.back() + 1e-9 * (1 + total)) breaks.push_back(z);
+  for (size_t b = 0; b + 1 < breaks.size(); ++b) {
+    const double z0 = breaks[b], z1 = breaks[b + 1];
     Component c;
-    double r = 0;
-    for (double zz : {std::max(L, z - half), z, std::min(total, z + half)}) r = std::max(r, body_radius(tool, std::min(zz, total), &c));
-    samples.push_back({z, std::hypot(half, r) + o.clearance_mm, false, r});
+    const double r0 = body_radius(tool, z0 + 1e-6 * (z1 - z0), &c), r1 = body_radius(tool, z1 - 1e-6 * (z1 - z0), &c);
+    double h = hb;
+    if (std::abs(r1 - r0) > 1e-12 * (1 + r0)) h = std::min(h, 0.25 * o.clearance_mm * (z1 - z0) / std::abs(r1 - r0));
+    if (!(sample_count + (z1 - z0) / h <= o.max_work))
+      throw InputError(fmt::format("collision check: the tool's body ({:g} mm long) would need more than {} axial samples: "
+                                   "raise the clearance",
+                                   total - L, o.max_work));
+    const int n = std::max(1, int(std::ceil((z1 - z0) / h)));
+    const double half = 0.5 * (z1 - z0) / n;
+    for (int k = 0; k <= n; ++k) {
+      const double z = z0 + (z1 - z0) * k / n, lo = std::max(z0, z - half), hi = std::min(z1, z + half);
+      const double r = std::max(r0 + (r1 - r0) * (lo - z0) / (z1 - z0), r0 + (r1 - r0) * (hi - z0) / (z1 - z0));
+      samples.push_back({z, std::hypot(half, r) + o.clearance_mm, false, r, lo - o.clearance_mm, hi + o.clearance_mm});
+    }
   }
+  sample_count = double(samples.size());
   // Positions: the poses and enough steps between them that no point moves more than clearance / 2.
   // Counted first, so that an absurd motion (50 m at 0.5 mm) is refused before any work.
   std::vector<int> steps(poses.size(), 1);
@@ -215,23 +278,24 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
         if (h.depth <= o.gouge_tolerance_mm) continue;
         if (o.design && left_to_design(*o.design, f.point, o.design_within_mm)) continue;
       } else {
-        // Exact gap between the part point and the solid of revolution (2D, in the axis' half plane).
-        const Eigen::Vector3d d = f.point - pos[size_t(here)].tip;
-        const double zq = d.dot(pos[size_t(here)].axis), rho = (d - zq * pos[size_t(here)].axis).norm();
-        double gap;
-        Component comp;
-        const double eps = 1e-9 * (1 + total);
-        if (zq < L - eps) {
-          const double r = body_radius(tool, L, &comp);
-          gap = rho <= r ? L - zq : std::hypot(L - zq, rho - r);
-        } else if (zq > total + eps) {
-          const double r = body_radius(tool, std::nextafter(total, 0.0), &comp);
-          gap = rho <= r ? zq - total : std::hypot(zq - total, rho - r);
-        } else {
-          gap = rho - body_radius(tool, std::clamp(zq, L, std::nextafter(total, 0.0)), &comp);
-        }
-        h.depth = -gap;  // > 0: inside the body
-        if (gap >= o.clearance_mm) continue;
+        // Exact gap between the part point and the solid of revolution (2D, in the axis' half plane),
+        // at the whole part's nearest point and at the slab's own.
+        const ToolPose& at = pos[size_t(here)];
+        const auto judge = [&](const Eigen::Vector3d& point) {
+          const Eigen::Vector3d d = point - at.tip;
+          const double zq = d.dot(at.axis), rho = (d - zq * at.axis).norm();
+          Component comp;
+          const double gap = body_gap(tool, zq, rho, &comp);
+          if (-gap > h.depth) h.depth = -gap, h.at = point, h.component = comp;  // depth > 0: inside the body
+        };
+        judge(f.point);
+        const double base = at.tip.dot(at.axis);
+        const Footpoint fs = part.closest_in_slab(c, at.axis, base + s.lo, base + s.hi);
+        ++queries[size_t(k)];
+        if (fs.face >= 0) judge(fs.point);
+        // (A point on the widened slab's end plane, exactly the clearance off the body, is clear however
+        // its gap rounds.)
+        if (-h.depth >= o.clearance_mm * (1 - 1e-9)) continue;
       }
       hits[size_t(k)].emplace_back(here, h);
     }
@@ -245,14 +309,9 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
   // Worst hit per position and component, then intervals of consecutive colliding positions.
   for (Component comp : {Component::Tool, Component::Shank, Component::Holder}) {
     std::vector<Hit> worst(static_cast<size_t>(np));
-    for (int k = 0; k < ns; ++k) {
-      const Sample& s = samples[size_t(k)];
-      Component sc = Component::Tool;
-      if (!s.cutter) body_radius(tool, s.z, &sc);
-      if (sc != comp) continue;
+    for (int k = 0; k < ns; ++k)
       for (const auto& [p, h] : hits[size_t(k)])
-        if (h.depth > worst[size_t(p)].depth) worst[size_t(p)] = h;
-    }
+        if (h.component == comp && h.depth > worst[size_t(p)].depth) worst[size_t(p)] = h;
     for (int p = 0; p < np;) {
       if (!std::isfinite(worst[size_t(p)].depth)) {
         ++p;

@@ -7,7 +7,10 @@
 //   holder  z beyond: a cone from Dh0 to Dh1 over Lh, then a cylinder of Dh1 over Lc.
 // It is sampled along the axis in slabs of width h; a slab is queried for the nearest part point
 // only when the part can be within reach (distance to the slab's bounding ball); the depth is
-// measured exactly at that nearest point. Between poses the motion is subdivided so that no point
+// measured exactly at that nearest point. Shank and holder slabs never straddle a change of the
+// body's profile (the holder's face, the end of its cone), and each is also judged at its own
+// nearest part point within the slab widened by the clearance (SurfaceIndex::closest_in_slab): a
+// nearer point beside the shank cannot hide one entering the holder through its face. Between poses the motion is subdivided so that no point
 // of the assembly moves more than half the clearance per step, so no wall thinner than the
 // clearance slips through. A sample far from the part skips the positions it cannot reach the
 // part from (the distance bounds the travel; found by bisection), so the cost follows the

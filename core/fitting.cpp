@@ -634,6 +634,7 @@ struct CheckSample {
   double reach = 0;      // rim and body: their radius (how far the axis is from the sample's surface)
   bool body = false;     // shank or holder
   double grow = 0;       // body: the sag of its spacing, hypot(half gap, r) - r, kept in hand
+  double u_lo = 0, u_hi = 0;  // body: its slab along the axis beyond the cutter's end (to the neighbours' midpoints, never across a step)
 };
 
 // Per body sample: the radius of a sphere at its axis point that encloses the body's slab around it
@@ -644,20 +645,21 @@ struct CheckSample {
 // not grown to the holder's radius (it was: a phantom 6 mm "intrusion" of every holder over a Ø8
 // shank, which trimmed the HECC impeller's patches).
 struct BodySphere {
-  double reach = 0, sag = 0;
+  double reach = 0, sag = 0, u_lo = 0, u_hi = 0;
 };
 std::vector<BodySphere> body_spheres(const std::vector<Eigen::Vector2d>& body) {
   std::vector<BodySphere> out(body.size());
   for (size_t k = 0; k < body.size(); ++k) {
-    double rho = body[k].y(), widest = 0;
+    double rho = body[k].y(), widest = 0, slab[2] = {body[k].x(), body[k].x()};
     for (const size_t nb : {k - 1, k + 1}) {
       if (nb >= body.size()) continue;  // k - 1 wrapped at k = 0
       const double gap = std::abs(body[nb].x() - body[k].x());
       widest = std::max(widest, gap);
       if (!(gap > 0)) continue;
       rho = std::max(rho, std::hypot(0.5 * gap, 0.5 * (body[k].y() + body[nb].y())));
+      slab[nb > k] = 0.5 * (body[k].x() + body[nb].x());
     }
-    out[k] = {rho, std::hypot(0.5 * widest, body[k].y()) - body[k].y()};
+    out[k] = {rho, std::hypot(0.5 * widest, body[k].y()) - body[k].y(), slab[0], slab[1]};
   }
   return out;
 }
@@ -710,7 +712,7 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
     for (size_t k = 0; k < c.body.size(); ++k) {
       const double u = c.body[k].x(), rho = spheres[k].reach;
       out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, rho + c.clearance, Eigen::Vector3d::Zero(), rho, true,
-                     spheres[k].sag});
+                     spheres[k].sag, spheres[k].u_lo, spheres[k].u_hi});
     }
   }
   return out;
@@ -816,9 +818,12 @@ BodyPoint body_nearest(const std::vector<Eigen::Vector2d>& body, const Eigen::Ve
 // the samples' spacing in hand (hypot(half gap, r) - r: 0.12 mm for a Ø8 shank sampled every 2 mm):
 // a part point between two samples may be nearer the body than the one found, which the collision
 // check's finer slabs see (the HECC impeller: a shank 0.005 mm inside its clearance there, after a
-// clean trim).
+// clean trim). Each sample is judged at two part points, the whole part's nearest to its axis point
+// and its slab's own (`in_slab`: the slab along the axis, widened by the clearance; face -1: none),
+// the nearer to the body counting: a nearer point beside the shank cannot hide a farther one entering
+// the holder through its face.
 void resolve_body(const Rails& r, const CheckSurface& c, std::vector<CheckSample>& samples, std::vector<CheckDistance>& dist,
-                  int m) {
+                  const std::vector<Footpoint>& in_slab, int m) {
   const double L = std::max(r.length, 1e-12);
   for (size_t k = 0; k < samples.size(); ++k) {
     CheckSample& cs = samples[k];
@@ -828,12 +833,21 @@ void resolve_body(const Rails& r, const CheckSurface& c, std::vector<CheckSample
     const bool at_b = cs.s >= 0.5;
     const Eigen::Vector3d a = r.a.point(t), b = r.b.point(t);
     const Eigen::Vector3d end = at_b ? b : a, dir = (at_b ? b - a : a - b).normalized();
-    const Eigen::Vector3d v = d.q - end;
-    const double u = v.dot(dir);
-    const Eigen::Vector3d radial_v = v - u * dir;
-    const double rho = radial_v.norm();
-    const Eigen::Vector3d radial = rho > 1e-12 ? Eigen::Vector3d(radial_v / rho) : dir.unitOrthogonal();
-    const BodyPoint bp = body_nearest(c.body, {u, rho});
+    Eigen::Vector3d radial = dir.unitOrthogonal();
+    BodyPoint bp;
+    const Eigen::Vector3d found = d.q;
+    for (const Eigen::Vector3d* q : {&found, in_slab[k].face >= 0 ? &in_slab[k].point : nullptr}) {
+      if (!q) continue;
+      const Eigen::Vector3d v = *q - end;
+      const double uq = v.dot(dir);
+      const Eigen::Vector3d radial_v = v - uq * dir;
+      const double rq = radial_v.norm();
+      const BodyPoint here = body_nearest(c.body, {uq, rq});
+      if (here.gap >= bp.gap) continue;
+      bp = here;
+      radial = rq > 1e-12 ? Eigen::Vector3d(radial_v / rq) : dir.unitOrthogonal();
+      d.q = *q;
+    }
     cs.s = at_b ? 1 + bp.at.x() / L : -bp.at.x() / L;
     cs.shift = bp.at.y() * radial;
     cs.offset = c.clearance + cs.grow;
@@ -862,7 +876,24 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
   for (size_t k = 0, i = 0; k < samples.size(); ++k)
     out[k] = on_part(k) ? check_distance(c, pts[k], fps[i++], c.solid ? &whole[k] : nullptr)
                         : body_distance(*c.solid, pts[k], whole[k]);
-  resolve_body(r, c, samples, out, m);
+  // Body samples outside the part that its nearest point leaves in doubt (within the reach of the
+  // ball around the slab): their slab's own nearest part point too.
+  std::vector<Footpoint> in_slab(samples.size());
+  const SurfaceIndex& body_part = c.solid ? *c.solid : *c.part;
+#pragma omp parallel for schedule(dynamic, 64)
+  for (size_t k = 0; k < samples.size(); ++k) {
+    const CheckSample& cs = samples[k];
+    if (!cs.body || !std::isfinite(out[k].distance) || out[k].distance < 0 ||
+        out[k].distance >= cs.reach + c.clearance + cs.grow)
+      continue;
+    const double t = double(cs.i) / (m - 1);
+    const bool at_b = cs.s >= 0.5;
+    const Eigen::Vector3d a = r.a.point(t), b = r.b.point(t);
+    const Eigen::Vector3d end = at_b ? b : a, dir = (at_b ? b - a : a - b).normalized();
+    const double base = dir.dot(end), widen = c.clearance + cs.grow;
+    in_slab[k] = body_part.closest_in_slab(pts[k], dir, base + cs.u_lo - widen, base + cs.u_hi + widen);
+  }
+  resolve_body(r, c, samples, out, in_slab, m);
   return out;
 }
 }  // namespace

@@ -280,6 +280,42 @@ TEST_CASE("a holder wider than its shank is judged by its face, not by balls tha
   CHECK(worst(-5.0) == doctest::Approx(4.0 + holder_bulge).epsilon(0.01));
 }
 
+TEST_CASE("a rail entering the holder through its face is seen behind a nearer clear ledge beside the shank") {
+  // The motion and tool above. A ledge 2.5 mm beside the Ø6 shank (x >= 10.5), its top 2 mm under the
+  // holder's face, and a wall 2 mm beside the holder (x >= 17, z 45-80): clear. On the other side a
+  // rail 9.5-9.9 mm off the axis (inside the Ø20 holder's radius) rising 0.5 mm through the face.
+  // Ledge and wall are nearer than the rail to every axis point, so one nearest part point per
+  // sample misses the rail; the slab's own nearest point (closest_in_slab) finds it.
+  Setup s;
+  ToolRadius cylinder;
+  cylinder.shape = ToolShape::Cylinder;
+  cylinder.D = {s.fr.length_to_unit(5)};
+  CheckSurface c;
+  c.tolerance = s.fr.length_to_unit(0.005), c.clearance = s.fr.length_to_unit(1.0);
+  c.up = Eigen::Vector3d::UnitZ();
+  for (int k = 0; k <= 20; k += 2) c.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(3));
+  for (int k = 20; k <= 50; k += 2) c.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(10));
+  const TriMesh ledge = test::merged(test::box_mesh({10.5, -20, 25}, {40, 80, 38}, 4), test::box_mesh({17, -20, 45}, {40, 80, 80}, 4));
+  const auto worst = [&](const TriMesh& part_mm) {
+    const SurfaceIndex part(to_unit(part_mm, s.fr));
+    c.part = &part;
+    double out = -INFINITY;
+    for (const bool enclose : {false, true}) {
+      const CheckProfile p = check_profile(s.initial, cylinder, c, 50, 30, enclose);
+      const auto w = std::max_element(p.intrusion.begin(), p.intrusion.end());
+      CHECK(p.body[size_t(w - p.intrusion.begin())] != 0);
+      out = std::max(out, s.fr.length_to_mm(*w));
+    }
+    return out;
+  };
+  const double shank_bulge = std::hypot(1.0, 3.0) - 3, holder_bulge = std::hypot(1.0, 10.0) - 10;
+  // Ledge and wall alone: the ledge 2 mm under the face (2.5 mm off the shank), 1 mm beyond the clearance.
+  CHECK(worst(ledge) == doctest::Approx(-1.0 + shank_bulge).epsilon(0.01));
+  // With the rail: 0.5 mm into the holder through its face and its side, 1.5 mm inside the clearance.
+  CHECK(worst(test::merged(ledge, test::box_mesh({-4.9, -20, 25}, {-4.5, 80, 40.5}, 4))) ==
+        doctest::Approx(1.5 + holder_bulge).epsilon(0.01));
+}
+
 TEST_CASE("a shank passing the flank's edge inside the clearance: the cutter is made longer at its holder end" * doctest::test_suite("heavy")) {
   // The blade block behind the flank x = 0 ends at z = 20, where the upright cutter (Ø10, tip at
   // z = 0) ends too; its Ø9.4 shank starts there, 0.3 mm off the block's top edge: inside the 1 mm

@@ -476,3 +476,50 @@ TEST_CASE("the pseudo-normal tells outside from inside next to a knife edge, whe
     CHECK(d.dot(index.pseudo_normal(f)) > 0);
   }
 }
+
+TEST_CASE("the closest point within a slab equals brute force, lies in the slab, and is the closest point when the slab holds all") {
+  const SurfaceIndex wavy(test::wavy_grid(40, 30, 120, 80, 8));
+  const SurfaceIndex soup(clean_mesh(random_soup(400, 6), "soup").mesh);
+  std::mt19937 rng(21);
+  std::normal_distribution<double> g(0, 1);
+  std::uniform_real_distribution<double> width(0.2, 6);
+  int checked = 0, empty = 0, mismatches = 0;
+  for (const SurfaceIndex* index : {&wavy, &soup}) {
+    for (const Eigen::Vector3d& p : random_points(index->mesh(), 15, 400, 22)) {
+      const Eigen::Vector3d n = Eigen::Vector3d(g(rng), g(rng), g(rng)).normalized();
+      // Slabs through p, beside it and far from it: the clipped faces' nearest point is off the
+      // global footpoint in most of them.
+      const double lo = n.dot(p) + 10 * g(rng), hi = lo + width(rng);
+      const Footpoint fast = index->closest_in_slab(p, n, lo, hi), slow = index->closest_in_slab_brute_force(p, n, lo, hi);
+      ++checked;
+      if (slow.face < 0) {
+        ++empty;
+        CHECK(fast.face < 0);
+        continue;
+      }
+      if (!(fast.face == slow.face && fast.distance == slow.distance && fast.point == slow.point)) ++mismatches;
+      const double h = n.dot(fast.point);
+      CHECK(h >= lo - 1e-9);
+      CHECK(h <= hi + 1e-9);
+      CHECK(fast.distance >= index->closest(p).distance - 1e-12);
+      // The footpoint lies on its face: its barycentric coordinates rebuild it.
+      const auto& F = index->mesh().faces[size_t(fast.face)];
+      Eigen::Vector3d rebuilt = Eigen::Vector3d::Zero();
+      for (int k = 0; k < 3; ++k) rebuilt += fast.barycentric[k] * index->mesh().vertices[size_t(F[size_t(k)])];
+      CHECK((rebuilt - fast.point).norm() < 1e-9);
+    }
+    // A slab that holds the whole mesh: the closest point itself.
+    for (const Eigen::Vector3d& p : random_points(index->mesh(), 15, 100, 23)) {
+      const Footpoint all = index->closest_in_slab(p, Eigen::Vector3d::UnitZ(), -1e4, 1e4), global = index->closest(p);
+      CHECK(all.face == global.face);
+      CHECK(all.distance == doctest::Approx(global.distance).epsilon(1e-12));
+    }
+  }
+  CHECK(mismatches == 0);
+  // Most slabs meet the mesh; some miss it (no footpoint, as for a query that is not finite).
+  CHECK(empty > 0);
+  CHECK(empty < checked / 4);
+  const Footpoint none = wavy.closest_in_slab({0, 0, 0}, Eigen::Vector3d::UnitZ(), 1e3, 1e3 + 1);
+  CHECK(none.face < 0);
+  CHECK(std::isinf(none.distance));
+}

@@ -297,3 +297,39 @@ TEST_CASE("the cutter is the union of the fitted spheres, not their radii: a ste
   for (int j = 0; j <= 40; ++j) radii.cutter.emplace_back(L * j / 40, tool.d(j / 40.0));
   CHECK(check_collisions(part, upright, radii, o).clear());
 }
+
+TEST_CASE("a post entering the holder through its face is found behind a nearer clear wall beside the shank") {
+  // The tool stands on z = 0 along +z: cutter r 5 up to z = 20, shank r 6 up to 50, the holder's face
+  // (r 15) at z = 50. A block 2.5 mm beside the shank, its top 1 mm under the face: clear by both.
+  // On the other side a post 1 mm square at r 13.5-14.5 rises 1 mm through the face. The block is
+  // nearer to every axis point that can reach the post (z < 77.5), so one nearest part point per
+  // axis point never sees the post.
+  const ToolAssembly t = assembly();
+  CollisionOptions o;
+  o.clearance_mm = 0.5;
+  const TriMesh block = test::box_mesh({8.5, -40, 0}, {40, 40, 49});
+  const TriMesh both = test::merged(block, test::box_mesh({-14.5, -0.5, 30}, {-13.5, 0.5, 51}));
+  const size_t base = block.vertices.size();
+  const std::vector<ToolPose> pose = {{Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ()}};
+  CHECK(check_collisions(SurfaceIndex(block), pose, t, o).clear());
+  const CollisionReport r = check_collisions(SurfaceIndex(both), pose, t, o);
+  REQUIRE(r.intervals.size() == 1);
+  const CollisionInterval& iv = r.intervals[0];
+  CHECK(iv.component == Component::Holder);
+  // Radial depth at the post's inner face, 13.5 mm off the axis, where the cone's radius is 15-15.25 mm.
+  CAPTURE(iv.at.transpose());
+  CHECK(iv.max_depth_mm > 1.5);
+  CHECK(iv.max_depth_mm <= 1.75 + 1e-9);
+  CHECK(iv.at.x() == doctest::Approx(-13.5));
+  CHECK(iv.at.z() >= 49.5);
+  // Lowered 0.6 mm (its top 0.4 mm above the face) the post is inside; 1.2 mm (0.2 under the face)
+  // within the clearance of the face, though 7.5 mm off the shank; 1.6 mm (0.6 under it) clear.
+  for (const double drop : {0.6, 1.2, 1.6}) {
+    CAPTURE(drop);
+    TriMesh lowered = both;
+    for (size_t v = base; v < lowered.vertices.size(); ++v) lowered.vertices[v].z() -= drop;
+    const CollisionReport l = check_collisions(SurfaceIndex(lowered), pose, t, o);
+    CHECK(l.clear() == (drop > 1.5));
+    if (drop == 1.2 && l.intervals.size() == 1) CHECK(l.intervals[0].max_depth_mm == doctest::Approx(-0.2).epsilon(1e-9));
+  }
+}
