@@ -237,37 +237,40 @@ TEST_CASE("shank and holder keep their clearance from the design surface too: a 
   CHECK(worst(3.5).first <= 0);
 }
 
-TEST_CASE("a holder wider than its shank is judged by its face, not by balls that bulge below it") {
-  // The upright motion (axis x = 5 mm, cutter z 0-20, Ø10 cylinder), a Ø6 shank z 20-40 and a Ø20
-  // holder z 40-70: the body as the job gives it, both sides of the step at u = 20 mm. A ledge at
-  // x >= 12 (7 mm off the axis: under the holder's rim, 4 mm clear of the shank), from z = 25 (clear
-  // of the cutter) to `top` mm below the holder's face.
-  Setup s;
+namespace {
+// The worst intrusion (mm) of the upright motion's Ø10 cylinder, Ø6 shank z 20-40 and Ø20 holder
+// z 40-70 (the body as the job gives it, both sides of the step at u = 20 mm; samples every 2 mm,
+// clearance 1 mm) into `part_mm`, coarse and grown profiles alike, where shank or holder is worst.
+double worst_body_intrusion(const Setup& s, const TriMesh& part_mm) {
   ToolRadius cylinder;
   cylinder.shape = ToolShape::Cylinder;
   cylinder.D = {s.fr.length_to_unit(5)};
-  std::vector<Eigen::Vector2d> body;
-  for (int k = 0; k <= 20; k += 2) body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(3));
-  for (int k = 20; k <= 50; k += 2) body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(10));
-  const auto worst = [&](double top) {
-    const SurfaceIndex ledge(to_unit(test::box_mesh({12, -20, 25}, {40, 80, 40 - top}, 4), s.fr));
-    CheckSurface c;
-    c.part = &ledge;
-    c.tolerance = s.fr.length_to_unit(0.005), c.clearance = s.fr.length_to_unit(1.0);
-    c.up = Eigen::Vector3d::UnitZ();
-    c.body = body;
-    double out = -INFINITY;
-    for (const bool enclose : {false, true}) {
-      const CheckProfile p = check_profile(s.initial, cylinder, c, 50, 30, enclose);
-      const auto w = std::max_element(p.intrusion.begin(), p.intrusion.end());
-      CHECK(p.body[size_t(w - p.intrusion.begin())] != 0);
-      out = std::max(out, s.fr.length_to_mm(*w));
-    }
-    return out;
-  };
-  // The clearance is kept with the sag of the spacing of the sample that found the point in hand:
-  // hypot(1, 3) - 3 = 0.162 mm on the shank, hypot(1, 10) - 10 = 0.050 on the holder (every 2 mm).
-  const double shank_bulge = std::hypot(1.0, 3.0) - 3, holder_bulge = std::hypot(1.0, 10.0) - 10;
+  const SurfaceIndex part(to_unit(part_mm, s.fr));
+  CheckSurface c;
+  c.part = &part;
+  c.tolerance = s.fr.length_to_unit(0.005), c.clearance = s.fr.length_to_unit(1.0);
+  c.up = Eigen::Vector3d::UnitZ();
+  for (int k = 0; k <= 20; k += 2) c.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(3));
+  for (int k = 20; k <= 50; k += 2) c.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(10));
+  double out = -INFINITY;
+  for (const bool enclose : {false, true}) {
+    const CheckProfile p = check_profile(s.initial, cylinder, c, 50, 30, enclose);
+    const auto w = std::max_element(p.intrusion.begin(), p.intrusion.end());
+    CHECK(p.body[size_t(w - p.intrusion.begin())] != 0);
+    out = std::max(out, s.fr.length_to_mm(*w));
+  }
+  return out;
+}
+// The clearance is kept with the sag of the spacing of the sample that found the point in hand:
+// hypot(1, 3) - 3 = 0.162 mm on the shank, hypot(1, 10) - 10 = 0.050 on the holder (every 2 mm).
+const double shank_bulge = std::hypot(1.0, 3.0) - 3, holder_bulge = std::hypot(1.0, 10.0) - 10;
+}  // namespace
+
+TEST_CASE("a holder wider than its shank is judged by its face, not by balls that bulge below it") {
+  // A ledge at x >= 12 (7 mm off the axis x = 5: under the holder's rim, 4 mm clear of the shank),
+  // from z = 25 (clear of the cutter) to `top` mm below the holder's face.
+  Setup s;
+  const auto worst = [&](double top) { return worst_body_intrusion(s, test::box_mesh({12, -20, 25}, {40, 80, 40 - top}, 4)); };
   // 4 mm below the face: clear by 4 mm of both shank and face, 3 mm beyond the clearance (a ball of
   // the holder's radius at its face reached 10 mm below it: 2.9 mm "inside" the clearance; the old
   // trim view grew the shank's last ball so).
@@ -281,38 +284,17 @@ TEST_CASE("a holder wider than its shank is judged by its face, not by balls tha
 }
 
 TEST_CASE("a rail entering the holder through its face is seen behind a nearer clear ledge beside the shank") {
-  // The motion and tool above. A ledge 2.5 mm beside the Ø6 shank (x >= 10.5), its top 2 mm under the
-  // holder's face, and a wall 2 mm beside the holder (x >= 17, z 45-80): clear. On the other side a
-  // rail 9.5-9.9 mm off the axis (inside the Ø20 holder's radius) rising 0.5 mm through the face.
-  // Ledge and wall are nearer than the rail to every axis point, so one nearest part point per
-  // sample misses the rail; the slab's own nearest point (closest_in_slab) finds it.
+  // A ledge 2.5 mm beside the Ø6 shank (x >= 10.5), its top 2 mm under the holder's face, and a wall
+  // 2 mm beside the holder (x >= 17, z 45-80): clear. On the other side a rail 9.5-9.9 mm off the
+  // axis (inside the Ø20 holder's radius) rising 0.5 mm through the face. Ledge and wall are nearer
+  // than the rail to every axis point, so one nearest part point per sample misses the rail (the
+  // old code: -0.84 mm, clear); the slab's own nearest point (closest_in_slab) finds it.
   Setup s;
-  ToolRadius cylinder;
-  cylinder.shape = ToolShape::Cylinder;
-  cylinder.D = {s.fr.length_to_unit(5)};
-  CheckSurface c;
-  c.tolerance = s.fr.length_to_unit(0.005), c.clearance = s.fr.length_to_unit(1.0);
-  c.up = Eigen::Vector3d::UnitZ();
-  for (int k = 0; k <= 20; k += 2) c.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(3));
-  for (int k = 20; k <= 50; k += 2) c.body.emplace_back(s.fr.length_to_unit(k), s.fr.length_to_unit(10));
   const TriMesh ledge = test::merged(test::box_mesh({10.5, -20, 25}, {40, 80, 38}, 4), test::box_mesh({17, -20, 45}, {40, 80, 80}, 4));
-  const auto worst = [&](const TriMesh& part_mm) {
-    const SurfaceIndex part(to_unit(part_mm, s.fr));
-    c.part = &part;
-    double out = -INFINITY;
-    for (const bool enclose : {false, true}) {
-      const CheckProfile p = check_profile(s.initial, cylinder, c, 50, 30, enclose);
-      const auto w = std::max_element(p.intrusion.begin(), p.intrusion.end());
-      CHECK(p.body[size_t(w - p.intrusion.begin())] != 0);
-      out = std::max(out, s.fr.length_to_mm(*w));
-    }
-    return out;
-  };
-  const double shank_bulge = std::hypot(1.0, 3.0) - 3, holder_bulge = std::hypot(1.0, 10.0) - 10;
   // Ledge and wall alone: the ledge 2 mm under the face (2.5 mm off the shank), 1 mm beyond the clearance.
-  CHECK(worst(ledge) == doctest::Approx(-1.0 + shank_bulge).epsilon(0.01));
+  CHECK(worst_body_intrusion(s, ledge) == doctest::Approx(-1.0 + shank_bulge).epsilon(0.01));
   // With the rail: 0.5 mm into the holder through its face and its side, 1.5 mm inside the clearance.
-  CHECK(worst(test::merged(ledge, test::box_mesh({-4.9, -20, 25}, {-4.5, 80, 40.5}, 4))) ==
+  CHECK(worst_body_intrusion(s, test::merged(ledge, test::box_mesh({-4.9, -20, 25}, {-4.5, 80, 40.5}, 4))) ==
         doctest::Approx(1.5 + holder_bulge).epsilon(0.01));
 }
 
