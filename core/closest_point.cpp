@@ -1142,11 +1142,13 @@ Footpoint SurfaceIndex::closest_in_slab(const Eigen::Vector3d& p, const Eigen::V
     int link;
     float d2;
   };
-  std::vector<Entry> stack{{0, 0.0F}};
+  // Depth first, at most three entries left behind per level of the tree (as in Impl::search).
+  Entry stack[256];
+  int top = 0;
   if (s.wide.empty()) visit_leaf(0, std::min(kLeafFaces, nf));
-  while (!s.wide.empty() && !stack.empty()) {
-    const Entry en = stack.back();
-    stack.pop_back();
+  else stack[top++] = {0, 0.0F};
+  while (top > 0) {
+    const Entry en = stack[--top];
     if (en.d2 > prune2) continue;
     if (en.link < 0) {
       visit_leaf((~en.link) >> 3, (~en.link) & 7);
@@ -1162,7 +1164,7 @@ Footpoint SurfaceIndex::closest_in_slab(const Eigen::Vector3d& p, const Eigen::V
       for (; i > 0 && d2[j] < d2[order[i - 1]]; --i) order[i] = order[i - 1];
       order[i] = j;
     }
-    for (int i = m - 1; i >= 0; --i) stack.push_back({w.link[order[i]], d2[order[i]]});
+    for (int i = m - 1; i >= 0; --i) stack[top++] = {w.link[order[i]], d2[order[i]]};
   }
   if (face < 0) return no_footpoint();
   const LeafFace& T = s.tri[size_t(slot)];
