@@ -79,30 +79,37 @@ double body_radius(const ToolAssembly& t, double z, Component* which) {
   return 0.5 * t.holder_diameter_far;
 }
 
+// The body's outline in the axis' half plane, (z from the tip, radius) and the component of the
+// segment ending there: up the shank's side from the cutter's end, out along the holder's face, up its
+// cone and cylinder, in along its far end to the axis.
+using BodyOutline = std::vector<std::pair<Eigen::Vector2d, Component>>;
+BodyOutline body_outline(const ToolAssembly& t) {
+  const double L = t.cutter_length(), total = t.total_length();
+  const double z1 = L + t.shank_length, z2 = z1 + t.holder_length;
+  const double rs = 0.5 * t.shank_diameter;
+  BodyOutline outline{{{L, rs}, Component::Shank}};
+  if (t.shank_length > 0) outline.push_back({{z1, rs}, Component::Shank});
+  if (t.holder_length + t.holder_cylinder_length > 0) {
+    outline.push_back({{z1, 0.5 * t.holder_diameter}, Component::Holder});
+    if (t.holder_length > 0) outline.push_back({{z2, 0.5 * t.holder_diameter_far}, Component::Holder});
+    outline.push_back({{total, 0.5 * t.holder_diameter_far}, Component::Holder});
+  }
+  outline.push_back({{total, 0.0}, outline.back().second});
+  return outline;
+}
+
 // The signed gap between a point at height z above the tip and rho off the axis and the body (shank
-// and holder as one solid of revolution), and the component there. Inside, the radial depth
-// (< 0). Outside, below the cutter's end, the distance to the shank's end (the cutter's own samples
-// judge the cutter); from there up the exact distance to the body's outline: the shank's side, the
-// holder's face, its cone and cylinder, its far end (a point under the holder's face beside the
-// shank is as far as the face, not as far as the shank).
-double body_gap(const ToolAssembly& t, double z, double rho, Component* which) {
+// and holder as one solid of revolution, `outline` = body_outline(t)), and the component there.
+// Inside, the radial depth (< 0). Outside, below the cutter's end, the distance to the shank's end
+// (the cutter's own samples judge the cutter); from there up the exact distance to the outline (a
+// point under the holder's face beside the shank is as far as the face, not as far as the shank).
+double body_gap(const ToolAssembly& t, const BodyOutline& outline, double z, double rho, Component* which) {
   const double L = t.cutter_length(), total = t.total_length();
   const double eps = 1e-9 * (1 + total);
   if (z < L - eps) {
     const double r = body_radius(t, L, which);
     return rho <= r ? L - z : std::hypot(L - z, rho - r);
   }
-  const double z1 = L + t.shank_length, z2 = z1 + t.holder_length;
-  const bool holder = t.holder_length + t.holder_cylinder_length > 0;
-  const double rs = 0.5 * t.shank_diameter;
-  std::vector<std::pair<Eigen::Vector2d, Component>> outline{{{L, rs}, Component::Shank}};
-  if (t.shank_length > 0) outline.push_back({{z1, rs}, Component::Shank});
-  if (holder) {
-    outline.push_back({{z1, 0.5 * t.holder_diameter}, Component::Holder});
-    if (t.holder_length > 0) outline.push_back({{z2, 0.5 * t.holder_diameter_far}, Component::Holder});
-    outline.push_back({{total, 0.5 * t.holder_diameter_far}, Component::Holder});
-  }
-  outline.push_back({{total, 0.0}, outline.back().second});
   if (z <= total + eps) {
     const double r = body_radius(t, std::clamp(z, L, std::nextafter(total, 0.0)), which);
     if (rho <= r) return rho - r;
@@ -154,7 +161,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
     if (c.y() >= 0.1 * rmax) rmin = std::min(rmin, c.y());
   const double hc = o.slab_mm > 0 ? o.slab_mm : std::sqrt(2 * rmin * o.gouge_tolerance_mm);
   const double hb = o.slab_mm > 0 ? o.slab_mm : std::max(0.5, 2 * o.clearance_mm);
-  double sample_count = std::ceil(L / hc) + std::ceil((total - L) / hb) + 3;  // an upper bound (cones: below)
+  double sample_count = std::ceil(L / hc) + std::ceil((total - L) / hb) + 3;  // an upper bound (a cone's: below)
   if (!(sample_count <= o.max_work))
     throw InputError(fmt::format("collision check: the tool ({:g} mm long) would need {:.0f} axial samples, more than {}: "
                                  "raise the gouge tolerance or the clearance",
@@ -185,7 +192,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
     const double r0 = body_radius(tool, z0 + 1e-6 * (z1 - z0), &c), r1 = body_radius(tool, z1 - 1e-6 * (z1 - z0), &c);
     double h = hb;
     if (std::abs(r1 - r0) > 1e-12 * (1 + r0)) h = std::min(h, 0.25 * o.clearance_mm * (z1 - z0) / std::abs(r1 - r0));
-    if (!(sample_count + (z1 - z0) / h <= o.max_work))
+    if (!(double(samples.size()) + (z1 - z0) / h <= o.max_work))
       throw InputError(fmt::format("collision check: the tool's body ({:g} mm long) would need more than {} axial samples: "
                                    "raise the clearance",
                                    total - L, o.max_work));
@@ -198,6 +205,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
     }
   }
   sample_count = double(samples.size());
+  const BodyOutline outline = body_outline(tool);
   // Positions: the poses and enough steps between them that no point moves more than clearance / 2.
   // Counted first, so that an absurd motion (50 m at 0.5 mm) is refused before any work.
   std::vector<int> steps(poses.size(), 1);
@@ -285,7 +293,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
           const Eigen::Vector3d d = point - at.tip;
           const double zq = d.dot(at.axis), rho = (d - zq * at.axis).norm();
           Component comp;
-          const double gap = body_gap(tool, zq, rho, &comp);
+          const double gap = body_gap(tool, outline, zq, rho, &comp);
           if (-gap > h.depth) h.depth = -gap, h.at = point, h.component = comp;  // depth > 0: inside the body
         };
         judge(f.point);

@@ -809,6 +809,17 @@ BodyPoint body_nearest(const std::vector<Eigen::Vector2d>& body, const Eigen::Ve
   return out;
 }
 
+// The body's end of a body sample's row and the direction along the axis away from the cutter
+// (u grows along it).
+struct BodyAxis {
+  Eigen::Vector3d end, dir;
+};
+BodyAxis body_axis(const Rails& r, const CheckSample& cs, int m) {
+  const double t = double(cs.i) / (m - 1);
+  const Eigen::Vector3d a = r.a.point(t), b = r.b.point(t);
+  return cs.s >= 0.5 ? BodyAxis{b, (b - a).normalized()} : BodyAxis{a, (a - b).normalized()};
+}
+
 // Shank and holder samples whose axis point lies outside the part: judged exactly at the part point
 // found for it, against the body's outline (body_nearest) instead of the sphere that encloses the
 // body's slab there (at a holder's face that sphere bulges its whole radius below the face, a
@@ -829,10 +840,8 @@ void resolve_body(const Rails& r, const CheckSurface& c, std::vector<CheckSample
     CheckSample& cs = samples[k];
     CheckDistance& d = dist[k];
     if (!cs.body || !std::isfinite(d.distance) || d.distance < 0) continue;
-    const double t = double(cs.i) / (m - 1);
     const bool at_b = cs.s >= 0.5;
-    const Eigen::Vector3d a = r.a.point(t), b = r.b.point(t);
-    const Eigen::Vector3d end = at_b ? b : a, dir = (at_b ? b - a : a - b).normalized();
+    const auto [end, dir] = body_axis(r, cs, m);
     Eigen::Vector3d radial = dir.unitOrthogonal();
     BodyPoint bp;
     const Eigen::Vector3d found = d.q;
@@ -886,10 +895,7 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
     if (!cs.body || !std::isfinite(out[k].distance) || out[k].distance < 0 ||
         out[k].distance >= cs.reach + c.clearance + cs.grow)
       continue;
-    const double t = double(cs.i) / (m - 1);
-    const bool at_b = cs.s >= 0.5;
-    const Eigen::Vector3d a = r.a.point(t), b = r.b.point(t);
-    const Eigen::Vector3d end = at_b ? b : a, dir = (at_b ? b - a : a - b).normalized();
+    const auto [end, dir] = body_axis(r, cs, m);
     const double base = dir.dot(end), widen = c.clearance + cs.grow;
     in_slab[k] = body_part.closest_in_slab(pts[k], dir, base + cs.u_lo - widen, base + cs.u_hi + widen);
   }
