@@ -623,11 +623,37 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   } catch (const InputError&) {
     return out;  // the motion left the surface: not a patch
   }
-  // With a check surface: kept out of the part (with_check), rejected when no stretch keeps clear.
-  out.fit = po.fit.check.part ? with_check(surface, std::move(out.fit), po) : machine_and_trim(surface, std::move(out.fit), po);
-  if (!machinable(out.fit)) return out;  // no tool, or cannot be trimmed clean: rejected
-  out.gain = gain_of(out.fit, covered, area, po.tolerance);
-  out.ok = true;
+  const FitResult fitted = out.fit.fit;  // untrimmed, its tip at the a end unless the part turned it
+  const auto judged = [&](PatchFit f) {
+    // With a check surface: kept out of the part (with_check), rejected when no stretch keeps clear.
+    return po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
+  };
+  out.fit = judged(std::move(out.fit));
+  if (machinable(out.fit)) out.gain = gain_of(out.fit, covered, area, po.tolerance), out.ok = true;
+  // Trimmed to less than 90% of its motion for gouging Φ (not for the part, whose own tip cut
+  // with_check has tried): a tool as long as the flank is high fits part of a twisted flank and
+  // gouges the rest (the HECC impeller's inducer is 67 mm high, tools up to 50 mm: on its upper half
+  // alone 8 patches bring 67% within 0.02 mm, 88% with this). The tool ground a quarter or half shorter at
+  // its tip, its motion fitted again over what it still reaches and judged as above; whichever of
+  // the three brings most uncovered area is the candidate.
+  if (!po.fit.fixed_tool && !out.fit.check_trim && out.fit.t_to - out.fit.t_from < 0.9) {
+    const bool tip_at_a = mean_axis(out.fit.fit.rails).dot(mean_axis(fitted.rails)) > 0;  // with_check turns the tip to a
+    for (const double c : {0.25, 0.5}) {
+      const ToolCut cut = tip_at_a ? cut_tool(fitted.rails, fitted.tool, c, 1) : cut_tool(fitted.rails, fitted.tool, 0, 1 - c);
+      PatchFit p;
+      p.trajectory = out.fit.trajectory;
+      p.initial = cut.rails;
+      try {
+        p.fit = optimize_motion(surface, cut.rails, po.fit);
+      } catch (const InputError&) {
+        continue;  // what stays of the tool left Φ
+      }
+      p = judged(std::move(p));
+      if (!machinable(p)) continue;
+      const double g = gain_of(p, covered, area, po.tolerance);
+      if (!out.ok || g > out.gain) out.fit = std::move(p), out.gain = g, out.ok = true;
+    }
+  }
   return out;
 }
 

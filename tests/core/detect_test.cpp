@@ -391,3 +391,41 @@ TEST_CASE("with a part: a flank taller than the longest tool is cut in two tiers
   CHECK(high >= 0.9);
   CHECK(d.coverage >= 0.95);
 }
+
+TEST_CASE("with a part: a flank twisted near its foot is cut above the twist by a tool ground shorter at its tip" * doctest::test_suite("heavy")) {
+  // The flank x = 0.01 (y - 30)^2 (y 0..60, z 0..60 mm), which a cylinder moving with its axis along
+  // z envelopes exactly, twisted below z = 30 by 0.0005 (30 - z)^2 (y - 30) / 30 mm (up to 0.45 mm at
+  // the foot's corners: no tool of revolution follows it there), standing on a floor z <= 0. The
+  // holder is away from the floor, so the tool's tip is at the foot. A tool as high as the flank
+  // (61 mm) fits the top and gouges the twisted foot, and the trim in t keeps only t 0.39-0.71: one
+  // patch brings 35% of the flank, 39% of its top (z > 36), within 0.02 mm. The tool ground shorter
+  // at its tip and its motion fitted again over what it still reaches: 52%, and 72% of the top (the
+  // rest lies beyond the propagated sweep, which the twist ends, not beyond the tool).
+  const TriMesh phi_mm = test::grid_mesh(41, 41, [](int j, int k) {
+    const double y = 1.5 * j, z = 1.5 * k, foot = std::max(0.0, 30 - z);
+    return Eigen::Vector3d(0.01 * (y - 30) * (y - 30) + 0.0005 * foot * foot * (y - 30) / 30, y, z);
+  });
+  const Similarity fr = unit_diagonal_frame(phi_mm);
+  const SurfaceIndex phi(transformed(phi_mm, fr));
+  const SurfaceIndex floor(transformed(test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4), fr));
+  CoverOptions o = cylinders_with_part(fr, floor, 0.02);
+  o.max_patches = 1;
+  const Detection d = detect_patches(phi, o);
+  REQUIRE(d.patches.size() == 1);
+  const PatchFit& f = d.patches[0].fit;
+  const double top = covered_share(phi_mm, d, o.patch.tolerance, [](const Eigen::Vector3d& x) { return x.z() > 36; });
+  MESSAGE("coverage ", d.coverage, ", z > 36: ", top, ", tool length ", fr.length_to_mm(f.fit.rails.length), " mm, t ",
+          f.t_from, "-", f.t_to, ", overcut ", fr.length_to_mm(d.overcut), " mm");
+  CHECK(machinable(f));
+  CHECK(fr.length_to_mm(f.fit.rails.length) <= 50);  // ground off at its tip, not the flank's 60 mm
+  CHECK(top >= 0.6);
+  CHECK(d.coverage >= 0.45);
+  CHECK(fr.length_to_mm(d.overcut) <= 0.02);
+  // The tool's tip stands above the foot's worst twist: the lowest point it brings within tolerance.
+  double lowest = INFINITY;
+  for (size_t v = 0; v < phi_mm.vertices.size(); ++v)
+    if (std::isfinite(d.deviation[v]) && std::abs(d.deviation[v]) <= o.patch.tolerance)
+      lowest = std::min(lowest, phi_mm.vertices[v].z());
+  MESSAGE("lowest point within tolerance: z ", lowest, " mm");
+  CHECK(lowest > 10);
+}
