@@ -1,11 +1,13 @@
 #include "core/detect.h"
 
 #include <Eigen/Dense>
+#include <fmt/format.h>
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <map>
 #include <numeric>
+#include <optional>
 #include <tuple>
 #include <array>
 
@@ -40,6 +42,7 @@ std::string CoverOptions::validate() const {
   if (!(band >= 0) || !std::isfinite(band)) return "cover.band: must be >= 0";
   if (lines < 2) return "cover.lines: at least 2";
   if (spares < 0) return "cover.spares: must be >= 0";
+  if (exchanges < 0) return "cover.exchanges: must be >= 0";
   if (patch.fit.fixed_tool && !(tool_length > 0 && std::isfinite(tool_length)))
     return "tool_length: must be positive with a fixed tool";
   if (up && !(up->norm() > 0 && up->allFinite())) return "up: must be a nonzero direction";
@@ -566,6 +569,9 @@ struct Fitted {
   PatchFit fit;
   double gain = 0;
   bool ok = false;
+  // Its tool is the fitted one cut shorter at its tip; whole_gain: what the whole tool brought.
+  bool cut = false;
+  double whole_gain = 0;
 };
 
 // A held tool's start (fixed or shared tool): the candidate's rails with the tool's axis length,
@@ -630,29 +636,40 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   };
   out.fit = judged(std::move(out.fit));
   if (machinable(out.fit)) out.gain = gain_of(out.fit, covered, area, po.tolerance), out.ok = true;
-  // Trimmed to less than 90% of its motion for gouging Φ (not for the part, whose own tip cut
-  // with_check has tried): a tool as long as the flank is high fits part of a twisted flank and
-  // gouges the rest (the HECC impeller's inducer is 67 mm high, tools up to 50 mm: on its upper half
-  // alone 8 patches bring 67% within 0.02 mm, 88% with this). The tool ground a quarter or half shorter at
-  // its tip, its motion fitted again over what it still reaches and judged as above; whichever of
-  // the three brings most uncovered area is the candidate.
-  if (!po.fit.fixed_tool && !out.fit.check_trim && out.fit.t_to - out.fit.t_from < 0.9) {
-    const bool tip_at_a = mean_axis(out.fit.fit.rails).dot(mean_axis(fitted.rails)) > 0;  // with_check turns the tip to a
-    for (const double c : {0.25, 0.5}) {
-      const ToolCut cut = tip_at_a ? cut_tool(fitted.rails, fitted.tool, c, 1) : cut_tool(fitted.rails, fitted.tool, 0, 1 - c);
-      PatchFit p;
-      p.trajectory = out.fit.trajectory;
-      p.initial = cut.rails;
-      try {
-        p.fit = optimize_motion(surface, cut.rails, po.fit);
-      } catch (const InputError&) {
-        continue;  // what stays of the tool left Φ
+  out.whole_gain = out.gain;
+  // Trimmed to less than 90% of its motion for gouging Φ, or gouging all along (not for the part,
+  // whose own tip cut with_check has tried): a tool as long as the flank is high fits part of a
+  // twisted flank and gouges the rest (the HECC impeller's inducer is 67 mm high, tools up to 50 mm:
+  // on its upper half alone 8 patches bring 67% within 0.02 mm, 88% with this). The axis cut a
+  // quarter or half shorter at the tool's tip, tool and motion fitted again over what it still
+  // reaches and judged as above; whichever brings most uncovered area is the candidate. The tip: the
+  // a end where the part has turned the tool (with_check), else the end away from `up`; with no
+  // `up`, either end is tried.
+  if (!po.fit.fixed_tool && !out.fit.check_trim && (out.fit.gouges || out.fit.t_to - out.fit.t_from < 0.9)) {
+    const std::optional<Eigen::Vector3d> up = po.fit.check.part ? po.fit.check.up : o.up;
+    std::vector<bool> tip_ends;  // tip at the a end of `fitted`
+    if (po.fit.check.part && po.orient_by_part)
+      tip_ends = {mean_axis(out.fit.fit.rails).dot(mean_axis(fitted.rails)) > 0};
+    else if (up)
+      tip_ends = {mean_axis(fitted.rails).dot(*up) >= 0};
+    else
+      tip_ends = {true, false};
+    for (const bool tip_at_a : tip_ends)
+      for (const double c : {0.25, 0.5}) {
+        const ToolCut cut = tip_at_a ? cut_tool(fitted.rails, fitted.tool, c, 1) : cut_tool(fitted.rails, fitted.tool, 0, 1 - c);
+        PatchFit p;
+        p.trajectory = out.fit.trajectory;
+        p.initial = cut.rails;
+        try {
+          p.fit = optimize_motion(surface, cut.rails, po.fit);
+        } catch (const InputError&) {
+          continue;  // what stays of the axis left Φ
+        }
+        p = judged(std::move(p));
+        if (!machinable(p)) continue;
+        const double g = gain_of(p, covered, area, po.tolerance);
+        if (!out.ok || g > out.gain) out.fit = std::move(p), out.gain = g, out.ok = true, out.cut = true;
       }
-      p = judged(std::move(p));
-      if (!machinable(p)) continue;
-      const double g = gain_of(p, covered, area, po.tolerance);
-      if (!out.ok || g > out.gain) out.fit = std::move(p), out.gain = g, out.ok = true;
-    }
   }
   return out;
 }
@@ -702,12 +719,27 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     for (size_t v = 0; v < nv; ++v) covered[v] = std::isfinite(out.deviation[v]) && std::abs(out.deviation[v]) <= tol;
   };
   update_union();
+  // What each patch brings first, in the order they were found (after patches were exchanged or refitted).
+  const auto recount_gains = [&]() {
+    std::fill(covered.begin(), covered.end(), 0);
+    for (size_t k = 0; k < fits.size(); ++k) {
+      gains[k] = gain_of(fits[k], covered, area, tol);
+      for (size_t v = 0; v < nv; ++v) {
+        const double d = fits[k].machined.design_deviation[v];
+        covered[v] |= std::isfinite(d) && std::abs(d) <= tol;
+      }
+    }
+  };
   out.stop = CoverStop::NoProgress;
   out.shared_tool = o.shared_tool || o.patch.fit.fixed_tool.has_value();
   int failures = 0;
   // Fitted candidates not chosen (spares), and, right after a shared tool has been fixed, those
   // fitted with their own tools, to be refitted with it (restarts).
   std::vector<Fitted> pool, restarts;
+  int exchanges = 0;
+  std::optional<Fitted> aside;  // the patch set aside in an exchange round, and its place in `fits`
+  size_t aside_at = 0;
+  std::vector<char> stays;      // per patch: set aside against this union and returned
   while (true) {
     if (out.coverage >= o.coverage) {
       out.stop = CoverStop::Coverage;
@@ -715,13 +747,38 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     }
     if (int(fits.size()) >= o.max_patches) {
       out.stop = CoverStop::MaxPatches;
-      break;
+      if (sharing || exchanges >= o.exchanges) break;
+      // An exchange round: of the patches not yet set aside against this union, the one whose own
+      // share (what no other patch covers) is least is set aside.
+      size_t weakest = fits.size();
+      double least = INFINITY;
+      for (size_t k = 0; k < fits.size(); ++k) {
+        if (stays[k]) continue;
+        std::vector<const MachinedSurface*> others;
+        for (size_t j = 0; j < fits.size(); ++j)
+          if (j != k) others.push_back(&fits[j].machined);
+        const double own = out.coverage - coverage(m, union_deviation(others, nv).deviation, tol);
+        if (own < least) least = own, weakest = k;
+      }
+      if (weakest == fits.size()) break;
+      ++exchanges;
+      aside = Fitted{fits[weakest], least, true};
+      aside_at = weakest;
+      pool.push_back(*aside);  // a spare from now on, should another patch take its place
+      fits.erase(fits.begin() + std::ptrdiff_t(weakest));
+      gains.erase(gains.begin() + std::ptrdiff_t(weakest));
+      stays.erase(stays.begin() + std::ptrdiff_t(weakest));
+      update_union();
+      report(fmt::format("exchange {} of {}: a patch bringing {:.1f}% of its own set aside", exchanges, o.exchanges,
+                         100 * least));
     }
     Fitted best;
+    double whole_best = 0;  // the best gain of a whole (not cut) tool this round
     // Fits made in earlier rounds first: their gain on what is still uncovered. The best spare is
     // this round's first candidate; when it reaches the target, no search is needed.
     const auto offer = [&](Fitted f) {
       if (!f.ok) return;
+      whole_best = std::max(whole_best, f.cut ? std::min(f.whole_gain, f.gain) : f.gain);
       if (f.gain > best.gain) std::swap(f, best);
       if (f.ok) pool.push_back(std::move(f));
     };
@@ -872,16 +929,33 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     fit_best(candidates_of(false), o.fitted_seeds);
     // When the seeded lines' best patch brings less than `orient_below` of the uncovered area, they
     // have likely missed the tool axis's direction (general tools) and the oriented ones are tried as
-    // well. Not always: a larger first patch is not a better cover (greedy), and the seeded lines
+    // well, judged by whole tools (a tool cut short at its tip can bring more from a line off the
+    // axis). Not always: a larger first patch is not a better cover (greedy), and the seeded lines
     // serve conical and cylindrical tools well.
-    if (!enough && o.oriented_explored > 0 && !(best.ok && best.gain >= o.orient_below * (1 - out.coverage))) {
+    if (!enough && o.oriented_explored > 0 && !(best.ok && whole_best >= o.orient_below * (1 - out.coverage))) {
       report("orienting seed lines");
 #pragma omp parallel for schedule(dynamic, 1)
       for (int k = 0; k < int(at_point.size()); ++k) orient_seeds(surface, at_point[size_t(k)], o);
       fit_best(candidates_of(true), o.oriented_fitted);
     }
-    // A patch must bring a real share of the surface (0.5%) within tolerance.
-    if (!best.ok || best.gain < 0.005) {
+    // An exchange round whose best brings no more than the patch set aside (and does not reach the
+    // target): that one returns to its place and stays; the next round sets aside the next weakest.
+    if (aside) {
+      const bool better = best.ok && (best.gain > aside->gain + 1e-4 || out.coverage + best.gain >= o.coverage);
+      const size_t at = aside_at;
+      if (!better) {
+        fits.insert(fits.begin() + std::ptrdiff_t(at), std::move(aside->fit));
+        gains.insert(gains.begin() + std::ptrdiff_t(at), aside->gain);
+        stays.insert(stays.begin() + std::ptrdiff_t(at), 1);
+        aside.reset();
+        update_union();
+        report("exchange: no better patch, the one set aside kept");
+        continue;
+      }
+      aside.reset();
+      std::fill(stays.begin(), stays.end(), 0);  // a new union: each may be the weakest again
+      ++out.exchanged;
+    } else if (!best.ok || best.gain < 0.005) {  // a patch must bring a real share of the surface (0.5%)
       // Nothing from these seeds: the next round takes the next-best ones (these are marked tried).
       if (++failures >= 3 || !any_seed) break;
       continue;
@@ -889,6 +963,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     failures = 0;
     fits.push_back(std::move(best.fit));
     gains.push_back(best.gain);
+    stays.push_back(0);
     update_union();
     report("patch accepted");
     // The most promising spares only (a machined surface each).
@@ -912,6 +987,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       pool.clear();
     }
   }
+  if (exchanges > 0) recount_gains();
   out.coverage_held_tool = out.coverage;
   if (sharing && fits.size() > 1) {
     // One joint refit of every patch with one tool (eq. 12 summed over the patches, the radii free
@@ -947,15 +1023,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         fits = std::move(refit);
         update_union();
         out.joint_refit = true;
-        // What each patch brings first, in the order they were found.
-        std::fill(covered.begin(), covered.end(), 0);
-        for (size_t k = 0; k < fits.size(); ++k) {
-          gains[k] = gain_of(fits[k], covered, area, tol);
-          for (size_t v = 0; v < nv; ++v) {
-            const double d = fits[k].machined.design_deviation[v];
-            covered[v] |= std::isfinite(d) && std::abs(d) <= tol;
-          }
-        }
+        recount_gains();
       }
     }
     report(out.joint_refit ? "joint refit kept" : "joint refit not kept (the held tool covers more)");

@@ -42,6 +42,11 @@ struct CoverOptions {
   // uncovered area): the next round starts from the best of them (a flank of its own, seeded and
   // fitted while another won, is not searched for again).
   int spares = 8;
+  // At max_patches short of the target: up to this many exchange rounds. The patch that brings the
+  // least no other patch covers is set aside (a spare) and one more round searched from what is then
+  // uncovered; the round's best patch takes the place when it brings more, else the set-aside patch
+  // returns and the next weakest is tried. Not with a shared tool (the first patch holds it).
+  int exchanges = 3;
   PatchOptions patch;      // fit, exploration, propagation, machined surface, tolerance
   // Tool policy (issue 14). Default: one custom tool per patch, fitted with it.
   // patch.fit.fixed_tool set (a catalogue tool): every candidate's motion is fitted to that tool,
@@ -83,6 +88,7 @@ struct Detection {
   double overcut = 0;                   // worst overcut of the union (>= 0, unit frame)
   CoverStop stop = CoverStop::NoProgress;
   int seeds_tried = 0;                  // trajectories fitted
+  int exchanged = 0;                    // patches replaced by a better one in exchange rounds
   // shared_tool: every patch has the same tool (same radii, tip at the a end). The union's coverage
   // with the first patch's tool held, and whether the joint refit replaced it (coverage not lower).
   bool shared_tool = false;

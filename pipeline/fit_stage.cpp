@@ -300,6 +300,7 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   CoverOptions co;
   co.coverage = job.cover->coverage;
   co.max_patches = job.cover->max_patches;
+  co.exchanges = job.cover->exchanges;
   co.patch.fit = fit;
   // With a part, every candidate patch is kept out of it (with_check: tip shortened, trimmed or refitted;
   // rejected when nothing stays clear), its holder at the end whose shank keeps out of the part (a
@@ -373,6 +374,7 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   c.overcut_mm = out.frame.length_to_mm(d.overcut);
   c.stop = to_string(d.stop);
   c.seeds_tried = d.seeds_tried;
+  c.exchanged = d.exchanged;
   c.one_tool = d.shared_tool;
   c.coverage_held_tool = d.coverage_held_tool;
   c.joint_refit = d.joint_refit;
@@ -854,9 +856,10 @@ std::string tool_label(const Job& job, const FittedPatch& p) {
 
 std::string cover_summary(const Job& job, const FittedJob& f) {
   if (!f.cover) return {};
-  return fmt::format("whole surface: {} patches{}, {:.1f}% within {} mm (stopped: {})", f.patches.size(),
+  return fmt::format("whole surface: {} patches{}, {:.1f}% within {} mm (stopped: {}{})", f.patches.size(),
                      job.tool.catalogue ? ", one catalogue tool" : job.tool.shared ? ", one shared tool" : "",
-                     100 * f.cover->coverage, job.tolerance_mm, f.cover->stop);
+                     100 * f.cover->coverage, job.tolerance_mm, f.cover->stop,
+                     f.cover->exchanged > 0 ? fmt::format("; {} exchanged for better", f.cover->exchanged) : "");
 }
 
 namespace {
@@ -882,6 +885,8 @@ nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
           {"coverage", c.coverage},
           {"target_coverage", job.cover->coverage},
           {"max_patches", job.cover->max_patches},
+          {"exchanges", job.cover->exchanges},
+          {"patches_exchanged", c.exchanged},
           {"patches", f.patches.size()},
           {"stop", c.stop},
           {"tolerance_mm", job.tolerance_mm},

@@ -59,6 +59,7 @@ struct CoverResult {
   double overcut_mm = 0;              // worst overcut of the union (>= 0)
   std::string stop;                   // coverage reached, max patches, no progress
   int seeds_tried = 0;
+  int exchanged = 0;                  // patches replaced in exchange rounds (cover.exchanges)
   // tool: {shared: true} (or a catalogue tool): one tool for every patch. Shared: the coverage with
   // the first patch's tool held for the others, and whether the joint refit of all patches was kept.
   bool one_tool = false;

@@ -363,13 +363,14 @@ Job read_job(const std::filesystem::path& file) {
     CoverJob& c = job.cover.emplace();
     if (const YAML::Node cv = root["cover"]) {
       if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8}");
-      r.only_keys(cv, "cover", {"coverage", "max_patches"});
+      r.only_keys(cv, "cover", {"coverage", "max_patches", "exchanges"});
       if (cv["coverage"]) {
         c.coverage = r.number(cv["coverage"], "cover.coverage");
         if (!(c.coverage > 0 && c.coverage <= 1))
           r.fail(cv["coverage"], "cover.coverage", fmt::format("must be in (0, 1], got {}", cv["coverage"].Scalar()));
       }
       if (cv["max_patches"]) c.max_patches = r.integer(cv["max_patches"], "cover.max_patches", 1, 32);
+      if (cv["exchanges"]) c.exchanges = r.integer(cv["exchanges"], "cover.exchanges", 0, 16);
     }
     return job;
   }
