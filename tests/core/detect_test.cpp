@@ -439,25 +439,25 @@ TEST_CASE("with a part: a flank twisted near its foot is cut above the twist by 
 }
 
 TEST_CASE("exchange rounds at max_patches replace the weakest patch only by one that brings more" * doctest::test_suite("heavy")) {
-  // The twisted flank of the test above with two patches at most. Without exchanges the greedy's
-  // two patches stand as found; with them the patch whose own share is least is set aside and a
+  // The twisted flank of the test above with one patch at most. Without exchanges the greedy's
+  // patch stands as found; with them the patch whose own share is least is set aside and a
   // round searched from what it leaves uncovered; a better patch takes its place, a worse one would
   // leave it there. One round here (each costs a search with the part).
   const TwistedFlank t;
   CoverOptions o = cylinders_with_part(t.fr, t.floor, 0.02);
-  o.max_patches = 2;
+  o.max_patches = 1;
   o.exchanges = 1;
-  // The greedy's coverage as its second patch is accepted, before any exchange (the same search as
+  // The greedy's coverage as its patch is accepted, before any exchange (the same search as
   // with exchanges: 0).
   double greedy = -1;
   const Detection d = detect_patches(t.phi, o, [&](const CoverProgress& p) {
-    if (greedy < 0 && p.stage == "patch accepted" && p.patches == 2) greedy = p.coverage;
+    if (greedy < 0 && p.stage == "patch accepted" && p.patches == 1) greedy = p.coverage;
   });
   MESSAGE("greedy ", greedy, "; after exchanges: ", d.patches.size(), " patches, ", d.coverage, ", ", d.exchanged,
           " exchanged, overcut ", t.fr.length_to_mm(d.overcut), " mm");
-  CHECK(d.patches.size() == 2);
+  CHECK(d.patches.size() == 1);
   CHECK(d.exchanged >= 1);
-  CHECK(d.coverage >= greedy + 0.005);  // 69.2% -> 69.9% (with 3 rounds: 71.3%, two exchanged)
+  CHECK(d.coverage >= greedy + 0.01);  // 51.7% -> 53.8% (two patches: 69.2% -> 69.9%, 71.3% in 3 rounds)
   double sum = 0;
   for (const DetectedPatch& p : d.patches) {
     CHECK(machinable(p.fit));
