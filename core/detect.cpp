@@ -942,11 +942,10 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     // target): that one returns to its place and stays; the next round sets aside the next weakest.
     if (aside) {
       const bool better = best.ok && (best.gain > aside->gain + 1e-4 || out.coverage + best.gain >= o.coverage);
-      const size_t at = aside_at;
       if (!better) {
-        fits.insert(fits.begin() + std::ptrdiff_t(at), std::move(aside->fit));
-        gains.insert(gains.begin() + std::ptrdiff_t(at), aside->gain);
-        stays.insert(stays.begin() + std::ptrdiff_t(at), 1);
+        fits.insert(fits.begin() + std::ptrdiff_t(aside_at), std::move(aside->fit));
+        gains.insert(gains.begin() + std::ptrdiff_t(aside_at), aside->gain);
+        stays.insert(stays.begin() + std::ptrdiff_t(aside_at), 1);
         aside.reset();
         update_union();
         report("exchange: no better patch, the one set aside kept");
