@@ -702,17 +702,29 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
       if (sj * L >= d && (1 - sj) * L >= d) out.push_back({i, sj, j, -c.tolerance, Eigen::Vector3d::Zero(), d});
     }
     const Eigen::Vector3d axis = (r.b.point(t) - r.a.point(t)).normalized();
-    const Eigen::Vector3d u = axis.unitOrthogonal(), v = axis.cross(u);
+    const Eigen::Vector3d u_ax = axis.unitOrthogonal(), v_ax = axis.cross(u_ax);
     if (c.ball_tip) out.push_back({i, ball_s, -1, ball_r - c.tolerance, Eigen::Vector3d::Zero(), ball_r});
     for (const double sr : rim_s)
       for (int k = 0; k < kRim; ++k) {
         const double th = 2 * M_PI * k / kRim;
-        out.push_back({i, sr, -1, -c.tolerance, tool.d(sr) * (std::cos(th) * u + std::sin(th) * v), tool.d(sr)});
+        out.push_back({i, sr, -1, -c.tolerance, tool.d(sr) * (std::cos(th) * u_ax + std::sin(th) * v_ax), tool.d(sr)});
       }
     for (size_t k = 0; k < c.body.size(); ++k) {
       const double u = c.body[k].x(), rho = spheres[k].reach;
       out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, rho + c.clearance, Eigen::Vector3d::Zero(), rho, true,
                      spheres[k].sag, spheres[k].u_lo, spheres[k].u_hi});
+    }
+    // The shank's rim at the cutter's end: a part point beside it (a flank's edge just short of the
+    // cutter's end, wider than the cutter) is nearer to the rim than any point nearest to the axis,
+    // which lie on the flank the cutter touches (on the HECC diffuser the shank passed the vane's
+    // lower edge 0.34 mm off, seen only by the collision check, and the program was refused).
+    if (!c.body.empty() && c.body[0].y() > 0) {
+      const double u = c.body[0].x(), rs = c.body[0].y();
+      for (int k = 0; k < kRim; ++k) {
+        const double th = 2 * M_PI * k / kRim;
+        out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, c.clearance, rs * (std::cos(th) * u_ax + std::sin(th) * v_ax), 0.0,
+                       true, 0.0, u, u});
+      }
     }
   }
   return out;

@@ -195,6 +195,22 @@ TEST_CASE("a point just behind the design surface is as deep as it lies behind i
   CHECK(d[4] == doctest::Approx(7));     // in front: the nearest face but the twin (the far side, through the hole)
 }
 
+namespace {
+// Upright rails at x = `x` mm (y 10..50, the cutter's tip at z = 5, its holder end at z = 25) and a
+// cylinder of radius `r` mm, in frame `fr`.
+Rails upright_rails(const Similarity& fr, double x) {
+  std::vector<AxisLine> lines;
+  for (double y : {10.0, 25.0, 40.0, 50.0}) lines.push_back({fr.to_unit({x, y, 5}), fr.to_unit({x, y, 25})});
+  return rails_from_lines(lines, 0, 0, FitOptions{});
+}
+ToolRadius cylinder_of(const Similarity& fr, double r) {
+  ToolRadius cylinder;
+  cylinder.shape = ToolShape::Cylinder;
+  cylinder.D = {fr.length_to_unit(r)};
+  return cylinder;
+}
+}  // namespace
+
 TEST_CASE("shank and holder keep their clearance from the design surface too: a shank wider than the cutter over a taller flank") {
   // Φ: the flank x = 0, y in [0, 60], z in [0, 100]; the part: the block behind it, whose x = 0 side
   // is Φ's twin (left out of the check surface). The cutter (Ø10, z 5-25) runs along Φ, and above
@@ -206,12 +222,8 @@ TEST_CASE("shank and holder keep their clearance from the design surface too: a 
   const CheckPart cp = check_part(block, phi, fr.length_to_unit(0.01));
   REQUIRE(cp.twin_faces == 32);
   const SurfaceIndex part(cp.mesh), solid(block);
-  std::vector<AxisLine> lines;
-  for (double y : {10.0, 25.0, 40.0, 50.0}) lines.push_back({fr.to_unit({5, y, 5}), fr.to_unit({5, y, 25})});
-  const Rails rails = rails_from_lines(lines, 0, 0, FitOptions{});
-  ToolRadius cylinder;
-  cylinder.shape = ToolShape::Cylinder;
-  cylinder.D = {fr.length_to_unit(5)};
+  const Rails rails = upright_rails(fr, 5);
+  const ToolRadius cylinder = cylinder_of(fr, 5);
   // The worst intrusion (mm) over the motion with a shank of radius r (clearance 1 mm), and whether
   // it is the body's.
   const auto worst = [&](double r) {
@@ -235,6 +247,37 @@ TEST_CASE("shank and holder keep their clearance from the design surface too: a 
   CHECK(near == doctest::Approx(0.5).epsilon(0.3));
   // Ø7: 1.5 mm off Φ: clear.
   CHECK(worst(3.5).first <= 0);
+}
+
+TEST_CASE("a shank wider than the cutter passing just above the flank's edge is seen at its rim") {
+  // The flank x = 0 (z 0-24.7 mm) in front of its block, the part's twin of it left out. The Ø6
+  // cutter (axis x = 3, z 5-25) ends 0.3 mm above the flank's top edge; its Ø8 shank starts there,
+  // reaching 1 mm over the block: 0.3 mm above its top face, 0.7 mm inside the 1 mm clearance (the
+  // HECC diffuser's vane under a detected patch's shank). The part points nearest to the shank's
+  // axis lie on the flank the cutter touches, 1.04 mm from the shank's rim: without samples on the
+  // rim this was judged clear, and the collision check refused the program.
+  const TriMesh phi_mm = test::grid_mesh(13, 31, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * k, 24.7 * j / 12); });
+  const Similarity fr = unit_diagonal_frame(phi_mm);
+  const SurfaceIndex phi(transformed(phi_mm, fr));
+  const TriMesh block = transformed(test::box_mesh({-10, 0, 0}, {0, 60, 24.7}, 4), fr);
+  const CheckPart cp = check_part(block, phi, fr.length_to_unit(0.01));
+  REQUIRE(cp.twin_faces > 0);
+  const SurfaceIndex part(cp.mesh), solid(block);
+  const Rails rails = upright_rails(fr, 3);
+  const ToolRadius cylinder = cylinder_of(fr, 3);
+  CheckSurface c;
+  c.part = &part, c.solid = &solid, c.solid_twin = &cp.twin, c.twin_sag = cp.twin_sag;
+  c.tolerance = fr.length_to_unit(0.01), c.clearance = fr.length_to_unit(1.0);
+  c.up = Eigen::Vector3d::UnitZ();
+  for (int k = 0; k <= 30; k += 2) c.body.emplace_back(fr.length_to_unit(k), fr.length_to_unit(4));
+  for (const bool enclose : {false, true}) {
+    const CheckProfile p = check_profile(rails, cylinder, c, 50, 30, enclose);
+    const auto w = std::max_element(p.intrusion.begin(), p.intrusion.end());
+    CHECK(p.body[size_t(w - p.intrusion.begin())] != 0);
+    CHECK(fr.length_to_mm(*w) == doctest::Approx(0.7).epsilon(0.03));
+    // All along the motion, not at one row.
+    CHECK(std::count_if(p.intrusion.begin(), p.intrusion.end(), [&](double v) { return fr.length_to_mm(v) > 0.65; }) == 50);
+  }
 }
 
 namespace {
