@@ -159,7 +159,8 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
   for (const auto& c : tool.cutter) rmax = std::max(rmax, c.y());
   for (const auto& c : tool.cutter)
     if (c.y() >= 0.1 * rmax) rmin = std::min(rmin, c.y());
-  const double hc = o.slab_mm > 0 ? o.slab_mm : std::sqrt(2 * rmin * o.gouge_tolerance_mm);
+  const double hc = o.slab_mm > 0 ? o.slab_mm
+                                  : std::sqrt(2 * rmin * (o.slab_tolerance_mm > 0 ? o.slab_tolerance_mm : o.gouge_tolerance_mm));
   const double hb = o.slab_mm > 0 ? o.slab_mm : std::max(0.5, 2 * o.clearance_mm);
   double sample_count = std::ceil(L / hc) + std::ceil((total - L) / hb) + 3;  // an upper bound (a cone's: below)
   if (!(sample_count <= o.max_work))

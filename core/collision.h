@@ -45,6 +45,10 @@ struct CollisionOptions {
   double clearance_mm = 1.0;        // shank and holder must stay this far from the part
   double gouge_tolerance_mm = 0.01; // the cutter may enter the part this deep (the fit's tolerance)
   double slab_mm = 0;               // axial sampling; 0: from the gouge tolerance and the radii
+  // The tolerance the cutter's axial sampling is spaced for (0: gouge_tolerance_mm). The samples are
+  // grown to enclose their slabs, so a depth depends on where the slabs fall: the fit, trimming at a
+  // share of the tolerance, samples as the final check at the full tolerance does.
+  double slab_tolerance_mm = 0;
   // Bounds on the work: positions grow with the motion's travel over half the clearance, axial
   // samples with the tool's length over the slabs, and the closest-point queries are at most
   // positions x samples. Beyond a bound check_collisions throws InputError saying what to change

@@ -98,27 +98,34 @@ std::pair<double, double> longest_run(const std::vector<char>& ok) {
   return {double(best_lo) / (n - 1), double(best_lo + best_len - 1) / (n - 1)};
 }
 
-// The cutter at each of Ω's rows judged as the collision check judges the program (check_collisions
-// on the poses at t_i = i / (rows - 1), the motion between them subdivided by half of `step`): per row,
-// the deepest cutter hit into `target` beyond `tolerance` (-inf: none), and where. `design`: hits within
-// design_within of Φ are Φ's (left_to_design), as in the collision check and the back-simulation.
+// The cutter at each of Ω's rows judged as the collision check judges the program: check_collisions
+// on the program's own poses (`poses` of them at t_j = j / (poses - 1), as the pipeline posts the
+// rails), the motion between them straight and subdivided by half of `step`; a hit between poses
+// j and j + 1 counts for every row in [t_j, t_j+1]. (The machine moves straight between the posted
+// poses: on the HECC diffuser's trailing edge those chords cut 0.021 mm into the vane where Ω's 300
+// rows found nothing, and the program was refused.) Per row, the deepest cutter hit into `target`
+// beyond `tolerance` (-inf: none), and where, the cutter sampled for `slab_tolerance` (the final
+// check's tolerance). `design`: hits within design_within of Φ are Φ's (left_to_design), as in the
+// collision check and the back-simulation.
 struct CutterHits {
   std::vector<double> depth;
   std::vector<Eigen::Vector3d> at;
 };
-CutterHits cutter_hits(const SurfaceIndex& target, const Rails& rails, const ToolRadius& tool, int rows, double tolerance,
-                       double step, const SurfaceIndex* design, double design_within) {
+CutterHits cutter_hits(const SurfaceIndex& target, const Rails& rails, const ToolRadius& tool, int rows, int pose_count,
+                       double tolerance, double slab_tolerance, double step, const SurfaceIndex* design, double design_within) {
   CutterHits out{std::vector<double>(size_t(rows), -INFINITY), std::vector<Eigen::Vector3d>(size_t(rows), Eigen::Vector3d::Zero())};
   ToolAssembly cutter;
   cutter.cutter = cutter_union(tool, rails.length);
+  const int P = std::max(pose_count, 2);
   std::vector<ToolPose> poses;
-  for (int i = 0; i < rows; ++i) {
-    const double t = double(i) / (rows - 1);
+  for (int j = 0; j < P; ++j) {
+    const double t = double(j) / (P - 1);
     const Eigen::Vector3d a = rails.a.point(t), b = rails.b.point(t);
     poses.push_back({a, (b - a).normalized()});
   }
   CollisionOptions co;
   co.gouge_tolerance_mm = tolerance;
+  co.slab_tolerance_mm = slab_tolerance;
   co.clearance_mm = step;
   co.design = design;
   co.design_within_mm = design_within;
@@ -128,9 +135,13 @@ CutterHits cutter_hits(const SurfaceIndex& target, const Rails& rails, const Too
   } catch (const InputError&) {  // beyond the check's bounds: the fit's own samples decide alone
     return out;
   }
-  for (const CollisionInterval& iv : r.intervals)
-    for (int i = iv.pose_begin; i <= iv.pose_end && i < rows; ++i)
+  for (const CollisionInterval& iv : r.intervals) {
+    const double t0 = double(iv.pose_begin) / (P - 1), t1 = double(iv.pose_end) / (P - 1);
+    const int i0 = std::max(0, int(std::floor(t0 * (rows - 1) + 1e-9)));
+    const int i1 = std::min(rows - 1, int(std::ceil(t1 * (rows - 1) - 1e-9)));
+    for (int i = i0; i <= i1; ++i)
       if (iv.max_depth_mm > out.depth[size_t(i)]) out.depth[size_t(i)] = iv.max_depth_mm, out.at[size_t(i)] = iv.at;
+  }
   return out;
 }
 
@@ -154,7 +165,8 @@ PartCheck part_check(const SurfaceIndex& surface, const PatchFit& f, const Patch
   const int rows = f.machined.omega.n_t;
   const CheckSurface& c = o.fit.check;
   return {check_profile(f.fit.rails, f.fit.tool, c, rows, o.fit.samples_s, true),
-          cutter_hits(*c.part, f.fit.rails, f.fit.tool, rows, threshold, hit_step(o), &surface, c.twin_sag + o.tolerance)};
+          cutter_hits(*c.part, f.fit.rails, f.fit.tool, rows, o.fit.samples_t, threshold, c.tolerance, hit_step(o), &surface,
+                      c.twin_sag + o.tolerance)};
 }
 // Its intrusion per row with the cutter's hits counted beyond `threshold` (those deeper than it): the
 // worst of the two, and where.
@@ -392,7 +404,8 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
     if (o.trim_gouges) {
       ok = ungouged_rows(out.machined, phi_keep);
       if (check) {
-        phi_hits = cutter_hits(surface, out.fit.rails, out.fit.tool, rows, phi_keep, hit_step(o), nullptr, 0);
+        phi_hits =
+            cutter_hits(surface, out.fit.rails, out.fit.tool, rows, o.fit.samples_t, phi_keep, o.tolerance, hit_step(o), nullptr, 0);
         for (size_t i = 0; i < ok.size(); ++i) ok[i] = ok[i] && !std::isfinite(phi_hits.depth[i]);
       }
     }
