@@ -190,37 +190,58 @@ Principal principal_at(const SurfaceIndex& surface, const std::vector<std::vecto
 // Sec. 4.1 over the whole surface: at a seed point, lines around the least-curvature direction,
 // offset along the normal by the candidate radii (and by the radius of curvature towards its
 // centre), each as long as the surface reaches along it; the most movable one on each side of Φ.
+// `width`: the direction of Φ's middle extent (principal axes of its vertices), across the flank.
 PointSeeds best_lines_at(const SurfaceIndex& surface, const std::vector<std::vector<int>>& ring, int v,
-                         const CoverOptions& o) {
+                         const Eigen::Vector3d& width, const CoverOptions& o) {
   const Eigen::Vector3d p = surface.mesh().vertices[size_t(v)], n = surface.normals()[size_t(v)];
   Eigen::Index k;
   n.cwiseAbs().minCoeff(&k);
   Eigen::Vector3d t1 = n.cross(Eigen::Vector3d::Unit(k)).normalized(), t2 = n.cross(t1);
-  const Principal pc = principal_at(surface, ring, v, t1, t2);
+  Principal pc = principal_at(surface, ring, v, t1, t2);
+  // Where Φ is flat (no curvature radius below 50 diagonals: the normal turns by less than a degree
+  // over the whole surface) its least-curvature direction is noise: on the HECC diffuser's vane (a
+  // near-plane but for its leading edge) it pointed anywhere, along the chord too, and the first
+  // patch brought 31% instead of 79%. There a tool's axis is laid across Φ's width, so that one tool
+  // spans the flank.
+  if (pc.valid && !(pc.radius > 0 && pc.radius < 50)) {
+    const Eigen::Vector3d w = width - width.dot(n) * n;
+    if (w.norm() > 0.3) pc.least = w.normalized();
+  }
   std::vector<std::pair<double, int>> offsets;  // radius, side
   for (double r : o.radii) offsets.emplace_back(r, 1), offsets.emplace_back(r, -1);
   if (pc.valid && pc.radius > 0.005 && pc.radius < 0.3) offsets.emplace_back(pc.radius, pc.side);
   // Around the least-curvature direction (±30 degrees); without it, evenly over the half circle.
+  // `across`: how much of a line's length counts as reach across Φ where F_l is at its floor. A line
+  // turned by φ from the least-curvature direction is 1/cos φ longer over the same strip, and on a
+  // developable flank (F_l at the floor for every turn) it ranked first for that alone: on the HECC
+  // diffuser's 15 mm high, 124 mm long vane the 30° line won, its cylinder fitted 0.011 mm off with
+  // its flat end 1.2 mm short of the hub (79% of the vane; the ruling line: 95%). Its reach is the
+  // length times cos φ, and a turn costs a little (10% of 1 - cos φ) so that ties go to the principal
+  // direction.
   std::vector<Eigen::Vector3d> dirs;
+  std::vector<double> across;
   if (pc.valid) {
     t1 = pc.least;
     t2 = n.cross(t1);
     for (int dk = 0; dk < o.directions; ++dk) {
       const double phi = o.directions == 1 ? 0.0 : (-30.0 + 60.0 * dk / (o.directions - 1)) * M_PI / 180;
       dirs.push_back(std::cos(phi) * t1 + std::sin(phi) * t2);
+      across.push_back(std::cos(phi) / (1 + 0.1 * (1 - std::cos(phi))));
     }
   } else {
     for (int dk = 0; dk < o.directions; ++dk) {
       const double phi = M_PI * dk / o.directions;
       dirs.push_back(std::cos(phi) * t1 + std::sin(phi) * t2);
+      across.push_back(1.0);
     }
   }
   std::array<std::vector<SeedLine>, 2> lines;  // per side: -1, +1
   constexpr int reach_samples = 121;  // 0.0125 apart: a line as short as 0.05 of the diagonal is seen
   constexpr double reach = 0.75;  // half-length of the probe line (unit frame)
   const auto u_of = [&](int i) { return -reach + 2 * reach * i / (reach_samples - 1); };
-  for (const Eigen::Vector3d& d : dirs)
+  for (size_t dk = 0; dk < dirs.size(); ++dk)
     for (const auto& [r, side] : offsets) {
+      const Eigen::Vector3d& d = dirs[dk];
       {
         const Eigen::Vector3d c = p + side * r * n;
         const auto inside = [&](double u) { return !surface.closest(Eigen::Vector3d(c + u * d)).on_boundary; };
@@ -249,9 +270,10 @@ PointSeeds best_lines_at(const SurfaceIndex& surface, const std::vector<std::vec
         const AxisLine line{c + u0 * d, c + u1 * d};
         const Movability m = line_movability(surface, line.a, line.b, o.patch.exploration.movability);
         if (!m.movable || m.used_samples * 5 < 4 * o.patch.exploration.movability.samples) continue;
-        // Below ~1e-8 (angles ~1e-4 rad) F_l is tessellation noise: among such lines the longest
-        // reaches furthest across Φ, so the rank is F_l floored there, per unit length.
-        lines[side > 0 ? 1 : 0].push_back(SeedLine{line, c, m.F, std::max(m.F, kMovableF) / (u1 - u0)});
+        // Below ~1e-8 (angles ~1e-4 rad) F_l is tessellation noise: among such lines the one that
+        // reaches furthest across Φ wins, so the rank is F_l floored there, per unit of reach.
+        lines[side > 0 ? 1 : 0].push_back(
+            SeedLine{line, c, m.F, std::max(m.F, kMovableF) / ((u1 - u0) * (m.F <= kMovableF ? across[dk] : 1.0))});
       }
   }
   PointSeeds out;
@@ -355,13 +377,18 @@ Seed refine_seed(const SurfaceIndex& surface, Seed seed, const CoverOptions& o) 
     const Eigen::Vector3d mid = 0.5 * (pa + pb), d = (pb - pa).normalized();
     return AxisLine{mid - 0.5 * L * d, mid + 0.5 * L * d};
   };
+  // A spread below 1% of the tolerance is no worse than none: below it the search would chase the
+  // tessellation's noise and turn the line at will (on the HECC diffuser's exactly ruled vane, lines
+  // seeded along the rulings ended 20-40° off them and their cylinders 0.011 mm off the vane).
+  const double noise = 0.01 * o.patch.tolerance;
+  const auto spread_of = [&](const AxisLine& l) { return std::max(sweep_spread(surface, l, o), noise); };
   X best = X::Zero();
-  double best_score = sweep_spread(surface, l0, o);
+  double best_score = spread_of(l0);
   // Common offset first (the radius is the least known), coarse, then the pattern search.
   for (int k = -4; k <= 4; ++k) {
     if (k == 0) continue;
     const X x(0.01 * k, 0.01 * k, 0, 0);
-    const double sc = sweep_spread(surface, line_of(x), o);
+    const double sc = spread_of(line_of(x));
     if (sc < best_score) best_score = sc, best = x;
   }
   double h = 0.005;
@@ -372,7 +399,7 @@ Seed refine_seed(const SurfaceIndex& surface, Seed seed, const CoverOptions& o) 
       for (int sign : {-1, 1}) {
         X x = best;
         x[i] += sign * h;
-        const double sc = sweep_spread(surface, line_of(x), o);
+        const double sc = spread_of(line_of(x));
         ++evals;
         if (sc < step_score) step_score = sc, step_best = x;
       }
@@ -674,6 +701,14 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   return out;
 }
 
+// The principal axes of Φ's vertices, by increasing extent (columns).
+Eigen::Matrix3d extent_axes(const TriMesh& m) {
+  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+  for (const auto& x : m.vertices) centre += x / double(m.vertices.size());
+  Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
+  for (const auto& x : m.vertices) C += (x - centre) * (x - centre).transpose();
+  return Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(C).eigenvectors();
+}
 
 }  // namespace
 
@@ -686,6 +721,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   const TriMesh& m = surface.mesh();
   const size_t nv = m.vertices.size();
   const std::vector<double> area = vertex_areas(m);
+  const Eigen::Matrix3d extents = extent_axes(m);
   const double tol = o.patch.tolerance;
   Detection out;
   std::vector<PatchFit> fits;
@@ -811,7 +847,8 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     report("seeding");
     std::vector<PointSeeds> at_point(points.size());
 #pragma omp parallel for schedule(dynamic, 1)
-    for (int k = 0; k < int(points.size()); ++k) at_point[size_t(k)] = best_lines_at(surface, ring, points[size_t(k)], o);
+    for (int k = 0; k < int(points.size()); ++k)
+      at_point[size_t(k)] = best_lines_at(surface, ring, points[size_t(k)], extents.col(1), o);
     bool any_seed = false;
     for (const auto& ps : at_point)
       for (const Seed& sd : ps.best) any_seed |= std::isfinite(sd.F);
@@ -1029,12 +1066,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   }
 
   // Machining order: along Φ's longest extent (principal axis of the vertices).
-  Eigen::Vector3d centre = Eigen::Vector3d::Zero();
-  for (const auto& x : m.vertices) centre += x / double(nv);
-  Eigen::Matrix3d C = Eigen::Matrix3d::Zero();
-  for (const auto& x : m.vertices) C += (x - centre) * (x - centre).transpose();
-  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(C);
-  Eigen::Vector3d axis = es.eigenvectors().col(2);
+  Eigen::Vector3d axis = extents.col(2);
   if (axis.sum() < 0) axis = -axis;  // deterministic sign
   std::vector<double> key(fits.size(), 0.0), weight(fits.size(), 0.0);
   for (size_t v = 0; v < nv; ++v)
