@@ -703,12 +703,14 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
     }
     const Eigen::Vector3d axis = (r.b.point(t) - r.a.point(t)).normalized();
     const Eigen::Vector3d u_ax = axis.unitOrthogonal(), v_ax = axis.cross(u_ax);
+    // Point k of a rim of `kRim` points and radius `radius` around the axis, from the axis point.
+    const auto rim_shift = [&](int k, double radius) {
+      const double th = 2 * M_PI * k / kRim;
+      return Eigen::Vector3d(radius * (std::cos(th) * u_ax + std::sin(th) * v_ax));
+    };
     if (c.ball_tip) out.push_back({i, ball_s, -1, ball_r - c.tolerance, Eigen::Vector3d::Zero(), ball_r});
     for (const double sr : rim_s)
-      for (int k = 0; k < kRim; ++k) {
-        const double th = 2 * M_PI * k / kRim;
-        out.push_back({i, sr, -1, -c.tolerance, tool.d(sr) * (std::cos(th) * u_ax + std::sin(th) * v_ax), tool.d(sr)});
-      }
+      for (int k = 0; k < kRim; ++k) out.push_back({i, sr, -1, -c.tolerance, rim_shift(k, tool.d(sr)), tool.d(sr)});
     for (size_t k = 0; k < c.body.size(); ++k) {
       const double u = c.body[k].x(), rho = spheres[k].reach;
       out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, rho + c.clearance, Eigen::Vector3d::Zero(), rho, true,
@@ -720,11 +722,8 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
     // lower edge 0.34 mm off, seen only by the collision check, and the program was refused).
     if (!c.body.empty() && c.body[0].y() > 0) {
       const double u = c.body[0].x(), rs = c.body[0].y();
-      for (int k = 0; k < kRim; ++k) {
-        const double th = 2 * M_PI * k / kRim;
-        out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, c.clearance, rs * (std::cos(th) * u_ax + std::sin(th) * v_ax), 0.0,
-                       true, 0.0, u, u});
-      }
+      for (int k = 0; k < kRim; ++k)
+        out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, c.clearance, rim_shift(k, rs), 0.0, true, 0.0, u, u});
     }
   }
   return out;

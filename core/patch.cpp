@@ -233,9 +233,9 @@ bool admissible_cut(const ToolCut& cut, const PatchOptions& o) {
 // length made is lost. Cuts of 5%, 10%, ... 60% of the length are tried; the one whose longest clear
 // stretch of rows times its remaining length is largest is kept. It is then shortened by bisection
 // (to 1/64 of a step) to the least cut that keeps the same clear stretch with half the check
-// tolerance in hand (machine_and_trim's denser check trims at a margin of it): on the HECC diffuser
-// the 5% step left the tip 1.2 mm short of the hub wall, two of the flank's 21 rows. Both cuts are
-// returned, the least first, measured; with_check keeps the one that machines more. None when the
+// tolerance in hand (machine_and_trim's denser check trims at a margin of it): a 5% step of a 50 mm
+// tool is 2.5 mm of flank left at the hub. Both cuts are returned, the least first, measured;
+// with_check keeps the one that machines more. None when the
 // tool is a fixed one (a catalogue or shared tool cannot be ground) or no cut helps.
 std::vector<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& plain, const PatchOptions& o) {
   if (o.fit.fixed_tool) return {};

@@ -391,7 +391,7 @@ TEST_CASE("check surface options name the bad field") {
 
 namespace {
 // The hub under the flank: a block below z = 0 whose top rises away from the flank, z = slope x
-// (mm), so a flat tool end level with the flank's lower edge enters it (3 mm deep at x = 10).
+// (mm), so a flat tool end level with the flank's lower edge enters it (10 slope mm deep at x = 10).
 TriMesh sloping_hub(double slope = 0.3) {
   TriMesh hub = test::box_mesh({0, -20, -10}, {30, 80, 0}, 4);
   for (Eigen::Vector3d& p : hub.vertices)

@@ -451,9 +451,9 @@ TEST_CASE("exchange rounds at max_patches replace the weakest patch only by one 
   // The twisted flank of the test above with one patch at most. Without exchanges the greedy's
   // patch stands as found; with them the patch whose own share is least is set aside and a round
   // searched from what it leaves uncovered; a better patch takes its place, a worse one leaves it
-  // there. One round here (each costs a search with the part). Since the seeds keep to the
-  // principal direction on flat ground the round finds no better patch here (before: 51.7% ->
-  // 53.8%): the set-aside patch must come back, and coverage stays exactly the greedy's.
+  // there. One round here (each costs a search with the part). Since session 22's changes to seeding
+  // and the fit's checks the round finds no better patch here (before: 51.7% -> 53.8%): then the
+  // set-aside patch must come back, and coverage stays exactly the greedy's.
   const TwistedFlank t;
   CoverOptions o = cylinders_with_part(t.fr, t.floor, 0.02);
   o.max_patches = 1;
