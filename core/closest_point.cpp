@@ -577,6 +577,11 @@ void SurfaceIndex::Impl::build_grid() {
         for (int d = 0; d < 3; ++d) {
           r[d][0] = long(std::floor((lo[d] - reach_now - pad - origin[d]) / h));
           r[d][1] = long(std::floor((hi[d] + reach_now + pad - origin[d]) / h));
+          // A face meets a cell in every slice its own extent spans (the cell holding its point
+          // there passes the slab test): one whose box spans 67 slices (65 without the widening)
+          // cannot fit, and its box (slices cubed) is not walked (a sliver across a machined
+          // surface's whole length had the walk run for minutes).
+          if (r[d][1] - r[d][0] >= 66) return -1L;
         }
         const Eigen::Vector3d nrm = (t.b - t.a).cross(t.c - t.a).normalized();
         const bool slab = nrm.allFinite();
@@ -590,10 +595,9 @@ void SurfaceIndex::Impl::build_grid() {
               }
               const uint64_t key = uint64_t((i * dim[1] + j) * dim[2] + m) << leaf_bits | uint64_t(l);
               if (n < 64) cell[n++] = key;
-              ++total;
+              if (++total > 64) return -1L;  // one leaf in over 64 cells: the cells are too small
             }
       }
-      if (total > 64) return -1L;  // one leaf in over 64 cells: the cells are too small
       std::sort(cell, cell + n);
       n = int(std::unique(cell, cell + n) - cell);
       if (out) std::copy(cell, cell + n, out);

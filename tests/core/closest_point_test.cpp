@@ -87,6 +87,21 @@ TEST_CASE("closest points equal brute force on a mesh with holes and skinny tria
   check_matches_brute_force(index, random_points(index.mesh(), 10, 1500, 7));
 }
 
+// One sliver 300 mm long in all three axes beside 20,000 faces 0.01 mm wide: the cell grid (cells a
+// leaf wide) cannot hold it, and deciding so once walked the sliver's box, (300 / 0.02)^3 cells (a
+// wild candidate's machined surface on NASA rotor 37 held a fit over 10 minutes). The index is built and answers exactly.
+TEST_CASE("a sliver spanning the whole box beside fine faces is indexed, and answers as brute force") {
+  TriMesh m = test::wavy_grid(101, 101, 1.0, 1.0, 0.02);
+  const int base = int(m.vertices.size());
+  for (const Eigen::Vector3d& v : {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(300, 300, 300), Eigen::Vector3d(300, 300.001, 300)})
+    m.vertices.push_back(v);
+  m.faces.push_back({base, base + 1, base + 2});
+  const SurfaceIndex index(m);
+  check_matches_brute_force(index, random_points(index.mesh(), 1, 300, 21));
+  const Footpoint on_sliver = index.closest({150, 150.0005, 150.3});
+  CHECK(on_sliver.face == int(m.faces.size()) - 1);
+}
+
 TEST_CASE("a footpoint carries consistent barycentrics, a unit normal and the boundary flag") {
   const SurfaceIndex index(test::wavy_grid(20, 20, 100, 100, 0));  // the plane z = 0, normals +z
   const Footpoint inside = index.closest({37.3, 41.9, 5.0});
