@@ -362,7 +362,7 @@ Job read_job(const std::filesystem::path& file) {
       if (root[k]) r.fail(root[k], k, "not with patches: auto (list the patches, e.g. from detected-job.yaml)");
     CoverJob& c = job.cover.emplace();
     if (const YAML::Node cv = root["cover"]) {
-      if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8}");
+      if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8, exchanges: 3}");
       r.only_keys(cv, "cover", {"coverage", "max_patches", "exchanges"});
       if (cv["coverage"]) {
         c.coverage = r.number(cv["coverage"], "cover.coverage");

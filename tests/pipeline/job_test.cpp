@@ -136,5 +136,8 @@ TEST_CASE("read_job: patches auto with cover options, and surface given as a map
   CHECK(defaults.cover->exchanges == 3);
   test::write_text(dir.file("job3.yaml"), "surface: s.obj\npatches: auto\ncover: {exchanges: 17}\n");
   CHECK(test::job_error(dir.file("job3.yaml")).find(dir.file("job3.yaml") + ":3: cover.exchanges") == 0);
+  test::write_text(dir.file("job4.yaml"), "surface: s.obj\npatches: auto\ncover: 0.9\n");
+  CHECK(test::job_error(dir.file("job4.yaml")) ==
+        dir.file("job4.yaml") + ":3: cover: expected {coverage: 0.95, max_patches: 8, exchanges: 3}");
   CHECK(error_of(dir, "cover: {max_patches: 3}") == dir.file("job.yaml") + ":1: cover: only with patches: auto");
 }
