@@ -103,10 +103,19 @@ BodyOutline body_outline(const ToolAssembly& t) {
 // Inside, the radial depth (< 0). Outside, below the cutter's end, the distance to the shank's end
 // (the cutter's own samples judge the cutter); from there up the exact distance to the outline (a
 // point under the holder's face beside the shank is as far as the face, not as far as the shank).
-double body_gap(const ToolAssembly& t, const BodyOutline& outline, double z, double rho, Component* which) {
+// A point below the cutter's end within `shade` (its end radius and the gouge tolerance: the surface
+// it touches there; -1 where the shank is wider than that end) is under the cutter's end face or
+// inside the cutter: a narrower shank cannot reach it but through the cutter, so it is the cutter's
+// alone (infinite gap; a Ø8 shank over a Ø9.7 cutter was held 0.5 mm off the blade's tip face the
+// cutter touched). A wider shank's face overhangs the cutter and does reach what lies under it.
+double body_gap(const ToolAssembly& t, const BodyOutline& outline, double z, double rho, double shade, Component* which) {
   const double L = t.cutter_length(), total = t.total_length();
   const double eps = 1e-9 * (1 + total);
   if (z < L - eps) {
+    if (rho <= shade) {
+      *which = Component::Shank;
+      return INFINITY;
+    }
     const double r = body_radius(t, L, which);
     return rho <= r ? L - z : std::hypot(L - z, rho - r);
   }
@@ -207,6 +216,10 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
   }
   sample_count = double(samples.size());
   const BodyOutline outline = body_outline(tool);
+  // Shaded only under a shank narrower than the cutter's end (a wider shank's face overhangs it).
+  Component at_end;
+  const double end_radius = cutter_radius(tool, L);
+  const double shade = body_radius(tool, L, &at_end) < end_radius ? end_radius + o.gouge_tolerance_mm : -1.0;
   // Positions: the poses and enough steps between them that no point moves more than clearance / 2.
   // Counted first, so that an absurd motion (50 m at 0.5 mm) is refused before any work.
   std::vector<int> steps(poses.size(), 1);
@@ -294,7 +307,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
           const Eigen::Vector3d d = point - at.tip;
           const double zq = d.dot(at.axis), rho = (d - zq * at.axis).norm();
           Component comp;
-          const double gap = body_gap(tool, outline, zq, rho, &comp);
+          const double gap = body_gap(tool, outline, zq, rho, shade, &comp);
           if (-gap > h.depth) h.depth = -gap, h.at = point, h.component = comp;  // depth > 0: inside the body
         };
         judge(f.point);

@@ -280,6 +280,39 @@ TEST_CASE("a shank wider than the cutter passing just above the flank's edge is 
   }
 }
 
+// The same flank and block under a Ø10 cutter (axis x = 5) whose end is 0.3 mm above the flank's top
+// edge, with a Ø9 shank: the edge is 0.58 mm from the shank's rim, inside the 1 mm clearance, but
+// under the cutter's end face, which the shank cannot pass: the cutter's alone (NASA rotor 37: a Ø8
+// shank over a Ø9.7 cutter skimming the blade's tip face was held off it, and its patches trimmed).
+// Without the tolerance on the cutter's radius, the edge where the cutter touches the flank counted:
+// 0.53 mm of shank intrusion on 30 of the 50 rows.
+TEST_CASE("a shank narrower than the cutter is not held off the part under the cutter's end face") {
+  const TriMesh phi_mm = test::grid_mesh(13, 31, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * k, 24.7 * j / 12); });
+  const Similarity fr = unit_diagonal_frame(phi_mm);
+  const SurfaceIndex phi(transformed(phi_mm, fr));
+  const TriMesh block = transformed(test::box_mesh({-10, 0, 0}, {0, 60, 24.7}, 4), fr);
+  const CheckPart cp = check_part(block, phi, fr.length_to_unit(0.01));
+  const SurfaceIndex part(cp.mesh), solid(block);
+  CheckSurface c;
+  c.part = &part, c.solid = &solid, c.solid_twin = &cp.twin, c.twin_sag = cp.twin_sag;
+  c.tolerance = fr.length_to_unit(0.01), c.clearance = fr.length_to_unit(1.0);
+  c.up = Eigen::Vector3d::UnitZ();
+  for (int k = 0; k <= 30; k += 2) c.body.emplace_back(fr.length_to_unit(k), fr.length_to_unit(4.5));
+  for (const bool enclose : {false, true}) {
+    CAPTURE(enclose);
+    const CheckProfile p = check_profile(upright_rails(fr, 5), cylinder_of(fr, 5), c, 50, 30, enclose);
+    CHECK(fr.length_to_mm(*std::max_element(p.intrusion.begin(), p.intrusion.end())) < 0.005);
+    CHECK(std::count(p.body.begin(), p.body.end(), char(0)) == 50);
+  }
+  // The shank's rim 0.1 mm wider than the cutter (Ø10.2): the edge is under the shank's end face, 0.3 mm
+  // below it, and the shank is held off it again.
+  for (Eigen::Vector2d& b : c.body) b.y() = fr.length_to_unit(5.1);
+  const CheckProfile wide = check_profile(upright_rails(fr, 5), cylinder_of(fr, 5), c, 50, 30, true);
+  const auto w = std::max_element(wide.intrusion.begin(), wide.intrusion.end());
+  CHECK(wide.body[size_t(w - wide.intrusion.begin())] != 0);
+  CHECK(fr.length_to_mm(*w) > 0.6);
+}
+
 namespace {
 // The worst intrusion (mm) of the upright motion's Ø10 cylinder, Ø6 shank z 20-40 and Ø20 holder
 // z 40-70 (the body as the job gives it, both sides of the step at u = 20 mm; samples every 2 mm,

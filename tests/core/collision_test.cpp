@@ -333,3 +333,30 @@ TEST_CASE("a post entering the holder through its face is found behind a nearer 
     if (drop == 1.2 && l.intervals.size() == 1) CHECK(l.intervals[0].max_depth_mm == doctest::Approx(-0.2).epsilon(1e-9));
   }
 }
+
+TEST_CASE("part under the cutter's end face is the cutter's, not the narrower shank's, and beside it under a wider shank it is the shank's") {
+  // The tool stands on z = 0 along +z: cutter r 5 up to z = 20, then the shank. A post of the design
+  // surface's own material (left to it, as Φ's twin is) 4.3-4.6 mm off the axis, its top 0.03 mm under
+  // the cutter's end: under a Ø8 shank it is 0.3 mm from the shank's rim, yet the shank cannot reach
+  // it but through the cutter (NASA rotor 37: a Ø8 shank over a Ø9.7 cutter skimming the blade's tip
+  // face was held off it and its patches trimmed).
+  ToolAssembly t = assembly();
+  t.shank_diameter = 8;
+  CollisionOptions o;
+  o.clearance_mm = 0.5;
+  const TriMesh post = test::box_mesh({4.3, -0.2, 10}, {4.6, 0.2, 19.97});
+  const SurfaceIndex part(post);
+  o.design = &part;
+  o.design_within_mm = 0.05;
+  const std::vector<ToolPose> pose = {{Eigen::Vector3d::Zero(), Eigen::Vector3d::UnitZ()}};
+  CHECK(check_collisions(part, pose, t, o).clear());
+  // Beside the cutter (5.2-5.4 mm off the axis), 0.3 mm under the end of a Ø12 shank: the shank's face
+  // is 0.3 mm above it, inside the 0.5 mm clearance.
+  t.shank_diameter = 12;
+  const SurfaceIndex beside(test::box_mesh({5.2, -0.2, 10}, {5.4, 0.2, 19.7}));
+  o.design = nullptr;
+  const CollisionReport r = check_collisions(beside, pose, t, o);
+  REQUIRE(r.intervals.size() == 1);
+  CHECK(r.intervals[0].component == Component::Shank);
+  CHECK(r.intervals[0].max_depth_mm == doctest::Approx(-0.3).epsilon(1e-9));
+}
