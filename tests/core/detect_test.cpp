@@ -72,6 +72,21 @@ struct TwistedFlank {
   SurfaceIndex floor{transformed(test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4), fr)};
 };
 
+// Counted from detection's progress with one patch at most and one exchange round: the greedy's
+// coverage as its patch is accepted, before any exchange (the same search as with exchanges: 0),
+// the rounds begun, and the rounds whose patch set aside came back.
+struct ExchangeRounds {
+  double greedy = -1;
+  int rounds = 0, returned = 0;
+  std::function<void(const CoverProgress&)> progress() {
+    return [this](const CoverProgress& p) {
+      if (greedy < 0 && p.stage == "patch accepted" && p.patches == 1) greedy = p.coverage;
+      if (p.stage.rfind("exchange 1 of 1:", 0) == 0) ++rounds;
+      if (p.stage == "exchange: no better patch, the one set aside kept") ++returned;
+    };
+  }
+};
+
 }  // namespace
 
 TEST_CASE("auto detection covers an exact envelope with one patch within 1e-4 of the diagonal and no overcut" * doctest::test_suite("heavy")) {
@@ -447,38 +462,53 @@ TEST_CASE("with a part: a flank twisted near its foot is cut above the twist by 
   CHECK(lowest > 10);
 }
 
-TEST_CASE("exchange rounds at max_patches replace the weakest patch only by one that brings more" * doctest::test_suite("heavy")) {
-  // The twisted flank of the test above with one patch at most. Without exchanges the greedy's
-  // patch stands as found; with them the patch whose own share is least is set aside and a round
-  // searched from what it leaves uncovered; a better patch takes its place, a worse one leaves it
-  // there. One round here (each costs a search with the part). Since session 22's changes to seeding
-  // and the fit's checks the round finds no better patch here (before: 51.7% -> 53.8%): then the
-  // set-aside patch must come back, and coverage stays exactly the greedy's.
+TEST_CASE("an exchange round that finds no better patch returns the one set aside" * doctest::test_suite("heavy")) {
+  // An exact envelope (arc motion, cone): one patch machines nearly all of it; the target 100% is not
+  // reached, so the round at max_patches sets that patch aside and searches again from the whole
+  // surface. Nothing brings more than the patch set aside: it returns to its place, and the cover is
+  // the greedy's exactly.
+  test::ExactEnvelope ex = test::exact_envelope("arc", cone_profile(6, 9), 50, 150);
+  const SurfaceIndex surface(ex.unit_mesh);
+  CoverOptions o;
+  o.patch.tolerance = 1e-4;
+  o.coverage = 1.0;
+  o.max_patches = 1;
+  o.exchanges = 1;
+  ExchangeRounds x;
+  const Detection d = detect_patches(surface, o, x.progress());
+  const double greedy = x.greedy;
+  const int rounds = x.rounds, returned = x.returned;
+  MESSAGE("greedy ", greedy, "; after the round: ", d.coverage, ", ", d.exchanged, " exchanged");
+  REQUIRE(d.patches.size() == 1);
+  CHECK(rounds == 1);
+  CHECK(returned == 1);
+  CHECK(d.exchanged == 0);
+  CHECK(d.stop == CoverStop::MaxPatches);
+  CHECK(greedy > 0.95);
+  CHECK(d.coverage == doctest::Approx(greedy).epsilon(1e-12));
+  CHECK(worst_overcut(d) <= 1e-4);
+}
+
+TEST_CASE("an exchange round at max_patches replaces the weakest patch by one that brings more" * doctest::test_suite("heavy")) {
+  // The twisted flank of the test above with one patch at most: the greedy's patch, found first, is
+  // set aside in one exchange round, and the round's search from the whole surface finds a patch
+  // bringing more (51.7% -> 56.6% within 0.02 mm), which takes its place.
   const TwistedFlank t;
   CoverOptions o = cylinders_with_part(t.fr, t.floor, 0.02);
   o.max_patches = 1;
   o.exchanges = 1;
-  // The greedy's coverage as its patch is accepted, before any exchange (the same search as
-  // with exchanges: 0), and the rounds reported.
-  double greedy = -1;
-  int rounds = 0, returned = 0;
-  const Detection d = detect_patches(t.phi, o, [&](const CoverProgress& p) {
-    if (greedy < 0 && p.stage == "patch accepted" && p.patches == 1) greedy = p.coverage;
-    if (p.stage.rfind("exchange 1 of 1:", 0) == 0) ++rounds;
-    if (p.stage == "exchange: no better patch, the one set aside kept") ++returned;
-  });
+  ExchangeRounds x;
+  const Detection d = detect_patches(t.phi, o, x.progress());
+  const double greedy = x.greedy;
+  const int rounds = x.rounds, returned = x.returned;
   MESSAGE("greedy ", greedy, "; after exchanges: ", d.patches.size(), " patches, ", d.coverage, ", ", d.exchanged,
           " exchanged, overcut ", t.fr.length_to_mm(d.overcut), " mm");
   CHECK(d.patches.size() == 1);
   CHECK(rounds == 1);
   CHECK(greedy > 0.5);
-  if (d.exchanged == 0) {
-    CHECK(returned == 1);
-    CHECK(d.coverage == doctest::Approx(greedy).epsilon(1e-12));
-  } else {
-    CHECK(returned == 0);
-    CHECK(d.coverage >= greedy + 0.01);
-  }
+  CHECK(d.exchanged == 1);
+  CHECK(returned == 0);
+  CHECK(d.coverage >= greedy + 0.03);
   double sum = 0;
   for (const DetectedPatch& p : d.patches) {
     CHECK(machinable(p.fit));
