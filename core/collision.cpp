@@ -82,19 +82,24 @@ double body_radius(const ToolAssembly& t, double z, Component* which) {
 // The body's outline in the axis' half plane, (z from the tip, radius) and the component of the
 // segment ending there: up the shank's side from the cutter's end, out along the holder's face, up its
 // cone and cylinder, in along its far end to the axis.
-using BodyOutline = std::vector<std::pair<Eigen::Vector2d, Component>>;
+struct BodyOutline {
+  std::vector<Eigen::Vector2d> points;
+  std::vector<Component> component;  // per point: the segment's ending there
+  void add(const Eigen::Vector2d& p, Component c) { points.push_back(p), component.push_back(c); }
+};
 BodyOutline body_outline(const ToolAssembly& t) {
   const double L = t.cutter_length(), total = t.total_length();
   const double z1 = L + t.shank_length, z2 = z1 + t.holder_length;
   const double rs = 0.5 * t.shank_diameter;
-  BodyOutline outline{{{L, rs}, Component::Shank}};
-  if (t.shank_length > 0) outline.push_back({{z1, rs}, Component::Shank});
+  BodyOutline outline;
+  outline.add({L, rs}, Component::Shank);
+  if (t.shank_length > 0) outline.add({z1, rs}, Component::Shank);
   if (t.holder_length + t.holder_cylinder_length > 0) {
-    outline.push_back({{z1, 0.5 * t.holder_diameter}, Component::Holder});
-    if (t.holder_length > 0) outline.push_back({{z2, 0.5 * t.holder_diameter_far}, Component::Holder});
-    outline.push_back({{total, 0.5 * t.holder_diameter_far}, Component::Holder});
+    outline.add({z1, 0.5 * t.holder_diameter}, Component::Holder);
+    if (t.holder_length > 0) outline.add({z2, 0.5 * t.holder_diameter_far}, Component::Holder);
+    outline.add({total, 0.5 * t.holder_diameter_far}, Component::Holder);
   }
-  outline.push_back({{total, 0.0}, outline.back().second});
+  outline.add({total, 0.0}, outline.component.back());
   return outline;
 }
 
@@ -123,17 +128,9 @@ double body_gap(const ToolAssembly& t, const BodyOutline& outline, double z, dou
     const double r = body_radius(t, std::clamp(z, L, std::nextafter(total, 0.0)), which);
     if (rho <= r) return rho - r;
   }
-  const Eigen::Vector2d q(z, rho);
-  double best = INFINITY;
-  *which = Component::Shank;
-  for (size_t k = 0; k + 1 < outline.size(); ++k) {
-    const Eigen::Vector2d a = outline[k].first, e = outline[k + 1].first - a;
-    const double len2 = e.squaredNorm();
-    const double f = len2 > 0 ? std::clamp((q - a).dot(e) / len2, 0.0, 1.0) : 0.0;
-    const double d = (q - a - f * e).norm();
-    if (d < best) best = d, *which = outline[k + 1].second;
-  }
-  return best;
+  const PolylinePoint near = polyline_nearest(outline.points, {z, rho});
+  *which = outline.component[near.segment + 1];
+  return near.distance;
 }
 
 struct Sample {

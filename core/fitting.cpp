@@ -12,6 +12,7 @@
 
 #include "core/errors.h"
 #include "core/fitting_residuals.h"
+#include "core/tool_end.h"
 
 namespace flankcam {
 
@@ -801,21 +802,13 @@ BodyPoint body_nearest(const std::vector<Eigen::Vector2d>& body, const Eigen::Ve
   // radius, is as deep as its way out through the shank's side, and the cutter's own samples judge it).
   std::vector<Eigen::Vector2d> outline(body.begin(), body.end());
   outline.emplace_back(body.back().x(), 0.0);
-  double best = INFINITY;
-  Eigen::Vector2d seg_normal = Eigen::Vector2d::UnitY();
-  for (size_t k = 0; k + 1 < outline.size(); ++k) {
-    const Eigen::Vector2d a = outline[k], e = outline[k + 1] - a;
-    const double len2 = e.squaredNorm();
-    const double f = len2 > 0 ? std::clamp((q - a).dot(e) / len2, 0.0, 1.0) : 0.0;
-    const Eigen::Vector2d x = a + f * e;
-    const double d = (q - x).norm();
-    if (d < best) {
-      best = d, out.at = x;
-      // Walking the outline up the side from the cutter's end and down the far face, the material is
-      // on the right: the outward normal is the direction turned left.
-      if (len2 > 0) seg_normal = Eigen::Vector2d(-e.y(), e.x()).normalized();
-    }
-  }
+  const PolylinePoint near = polyline_nearest(outline, q);
+  const double best = near.distance;
+  out.at = near.at;
+  // Walking the outline up the side from the cutter's end and down the far face, the material is on
+  // the right: the outward normal is the direction turned left.
+  const Eigen::Vector2d e = outline[near.segment + 1] - outline[near.segment];
+  const Eigen::Vector2d seg_normal = e.squaredNorm() > 0 ? Eigen::Vector2d(-e.y(), e.x()).normalized() : Eigen::Vector2d::UnitY();
   // Inside: between the end faces and below the radius there (at a step, the wider side's).
   bool inside = false;
   if (q.x() >= body.front().x() && q.x() <= body.back().x())

@@ -130,6 +130,20 @@ double profile_radius(const std::vector<Eigen::Vector2d>& p, double z) {
   return a.y() + (b.y() - a.y()) * (z - a.x()) / (b.x() - a.x());
 }
 
+PolylinePoint polyline_nearest(const std::vector<Eigen::Vector2d>& line, const Eigen::Vector2d& q) {
+  PolylinePoint out;
+  for (size_t k = 0; k + 1 < line.size(); ++k) {
+    const Eigen::Vector2d a = line[k], e = line[k + 1] - a;
+    const double len2 = e.squaredNorm();
+    if (!(len2 > 0)) continue;
+    const Eigen::Vector2d x = a + std::clamp((q - a).dot(e) / len2, 0.0, 1.0) * e;
+    const double d = (q - x).norm();
+    if (d < out.distance) out = {k, x, d};
+  }
+  if (!std::isfinite(out.distance) && !line.empty()) out = {0, line[0], (q - line[0]).norm()};
+  return out;
+}
+
 EndDistance end_distance(const EndProfile& e, double z, double rho) {
   const std::vector<Eigen::Vector2d>& p = e.profile;
   const double z0 = e.tip_z;

@@ -14,6 +14,7 @@
 // lowest band, it does not lengthen the tool.
 #pragma once
 #include <Eigen/Core>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -47,6 +48,17 @@ struct EndProfile {
 // The profile's radius at z (z, r points with z increasing): linear between its points, its end
 // radii beyond them.
 [[nodiscard]] double profile_radius(const std::vector<Eigen::Vector2d>& profile, double z);
+
+// The point of a polyline in the tool's half plane (z, r) nearest to q: the segment it lies on (from
+// point `segment` to the next; segments of zero length are passed over: their point ends a neighbour
+// too), the point, and its distance. Ties: the first. All its points one: that point (segment 0);
+// no points: an infinite distance.
+struct PolylinePoint {
+  size_t segment = 0;
+  Eigen::Vector2d at = Eigen::Vector2d::Zero();
+  double distance = INFINITY;
+};
+[[nodiscard]] PolylinePoint polyline_nearest(const std::vector<Eigen::Vector2d>& line, const Eigen::Vector2d& q);
 
 // The radius of the ball end of this side meridian (the corner radius with rc = 0).
 [[nodiscard]] double ball_radius(const std::vector<Eigen::Vector2d>& side);

@@ -69,6 +69,30 @@ ToolEnd corner(double r) { return {EndKind::Corner, r, 1}; }
 
 }  // namespace
 
+TEST_CASE("the nearest point of a polyline: its segment, past a zero-length one, and a lone point") {
+  // A shank's outline: up its side (0,4)-(30,4), a zero-length step (the holder as wide as the
+  // shank), out along the holder's face to (30,10), up to (70,10), in to the axis.
+  const std::vector<Eigen::Vector2d> line = {{0, 4}, {30, 4}, {30, 4}, {30, 10}, {70, 10}, {70, 0}};
+  PolylinePoint p = polyline_nearest(line, {10, 6});
+  CHECK(p.segment == 0);
+  CHECK(p.at.isApprox(Eigen::Vector2d(10, 4)));
+  CHECK(p.distance == doctest::Approx(2.0));
+  p = polyline_nearest(line, {28, 7});  // 2 mm from the face, 3 from the side
+  CHECK(p.segment == 2);
+  CHECK(p.at.isApprox(Eigen::Vector2d(30, 7)));
+  CHECK(p.distance == doctest::Approx(2.0));
+  p = polyline_nearest(line, {33, 2});  // beyond the corner (30, 4): the side's end, found first
+  CHECK(p.segment == 0);
+  CHECK(p.distance == doctest::Approx(std::hypot(3.0, 2.0)));
+  p = polyline_nearest(line, {75, 5});  // beyond the far face
+  CHECK(p.segment == 4);
+  CHECK(p.distance == doctest::Approx(5.0));
+  p = polyline_nearest({{1, 1}, {1, 1}}, {4, 5});
+  CHECK(p.segment == 0);
+  CHECK(p.distance == doctest::Approx(5.0));
+  CHECK(std::isinf(polyline_nearest({}, {0, 0}).distance));
+}
+
 TEST_CASE("end profiles of a cylinder: flat keeps the side, corner R is a quarter circle, ball reaches the axis") {
   const std::vector<Eigen::Vector2d> side = meridian(cylinder(5), 20, 61);
   const EndProfile flat = end_profile(side, {});
