@@ -730,8 +730,8 @@ std::vector<CheckSample> check_samples(const Rails& r, const ToolRadius& tool, c
     // patches (cutters Ø9.7 over a Ø8 shank) to 77.5% of the blade where they had machined 91.1%.
     if (!c.body.empty() && c.body[0].y() > d_b) {
       const double u = c.body[0].x(), rs = c.body[0].y();
-      for (int k = 0; k < kRim; ++k)
-        out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, c.clearance, rim_shift(k, rs), 0.0, true, 0.0, u, u, shade});
+      for (int k = 0; k < kRim; ++k)  // a wider shank: not shaded (CheckSample::shade -1)
+        out.push_back({i, body_at_b ? 1 + u / L : -u / L, -1, c.clearance, rim_shift(k, rs), 0.0, true, 0.0, u, u});
     }
   }
   return out;

@@ -249,6 +249,28 @@ TEST_CASE("shank and holder keep their clearance from the design surface too: a 
   CHECK(worst(3.5).first <= 0);
 }
 
+namespace {
+// The flank x = 0 (y 0-60, z 0-24.7 mm) in front of its block, the part's twin of it left out, in the
+// unit frame `fr`; check(r) is its check surface for a shank of radius r mm from the cutter's end
+// (30 mm, samples every 2 mm), tolerance 0.01 mm, clearance 1 mm, up +z.
+struct FlankBeforeBlock {
+  TriMesh phi_mm = test::grid_mesh(13, 31, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * k, 24.7 * j / 12); });
+  Similarity fr = unit_diagonal_frame(phi_mm);
+  SurfaceIndex phi{transformed(phi_mm, fr)};
+  TriMesh block = transformed(test::box_mesh({-10, 0, 0}, {0, 60, 24.7}, 4), fr);
+  CheckPart cp = check_part(block, phi, fr.length_to_unit(0.01));
+  SurfaceIndex part{cp.mesh}, solid{block};
+  CheckSurface check(double shank_radius_mm) const {
+    CheckSurface c;
+    c.part = &part, c.solid = &solid, c.solid_twin = &cp.twin, c.twin_sag = cp.twin_sag;
+    c.tolerance = fr.length_to_unit(0.01), c.clearance = fr.length_to_unit(1.0);
+    c.up = Eigen::Vector3d::UnitZ();
+    for (int k = 0; k <= 30; k += 2) c.body.emplace_back(fr.length_to_unit(k), fr.length_to_unit(shank_radius_mm));
+    return c;
+  }
+};
+}  // namespace
+
 TEST_CASE("a shank wider than the cutter passing just above the flank's edge is seen at its rim") {
   // The flank x = 0 (z 0-24.7 mm) in front of its block, the part's twin of it left out. The Ø6
   // cutter (axis x = 3, z 5-25) ends 0.3 mm above the flank's top edge; its Ø8 shank starts there,
@@ -256,20 +278,12 @@ TEST_CASE("a shank wider than the cutter passing just above the flank's edge is 
   // HECC diffuser's vane under a detected patch's shank). The part points nearest to the shank's
   // axis lie on the flank the cutter touches, 1.04 mm from the shank's rim: without samples on the
   // rim this was judged clear, and the collision check refused the program.
-  const TriMesh phi_mm = test::grid_mesh(13, 31, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * k, 24.7 * j / 12); });
-  const Similarity fr = unit_diagonal_frame(phi_mm);
-  const SurfaceIndex phi(transformed(phi_mm, fr));
-  const TriMesh block = transformed(test::box_mesh({-10, 0, 0}, {0, 60, 24.7}, 4), fr);
-  const CheckPart cp = check_part(block, phi, fr.length_to_unit(0.01));
-  REQUIRE(cp.twin_faces > 0);
-  const SurfaceIndex part(cp.mesh), solid(block);
+  const FlankBeforeBlock f;
+  REQUIRE(f.cp.twin_faces > 0);
+  const Similarity& fr = f.fr;
   const Rails rails = upright_rails(fr, 3);
   const ToolRadius cylinder = cylinder_of(fr, 3);
-  CheckSurface c;
-  c.part = &part, c.solid = &solid, c.solid_twin = &cp.twin, c.twin_sag = cp.twin_sag;
-  c.tolerance = fr.length_to_unit(0.01), c.clearance = fr.length_to_unit(1.0);
-  c.up = Eigen::Vector3d::UnitZ();
-  for (int k = 0; k <= 30; k += 2) c.body.emplace_back(fr.length_to_unit(k), fr.length_to_unit(4));
+  const CheckSurface c = f.check(4);
   for (const bool enclose : {false, true}) {
     const CheckProfile p = check_profile(rails, cylinder, c, 50, 30, enclose);
     const auto w = std::max_element(p.intrusion.begin(), p.intrusion.end());
@@ -287,17 +301,9 @@ TEST_CASE("a shank wider than the cutter passing just above the flank's edge is 
 // Without the tolerance on the cutter's radius, the edge where the cutter touches the flank counted:
 // 0.53 mm of shank intrusion on 30 of the 50 rows.
 TEST_CASE("a shank narrower than the cutter is not held off the part under the cutter's end face") {
-  const TriMesh phi_mm = test::grid_mesh(13, 31, [](int j, int k) { return Eigen::Vector3d(0, 2.0 * k, 24.7 * j / 12); });
-  const Similarity fr = unit_diagonal_frame(phi_mm);
-  const SurfaceIndex phi(transformed(phi_mm, fr));
-  const TriMesh block = transformed(test::box_mesh({-10, 0, 0}, {0, 60, 24.7}, 4), fr);
-  const CheckPart cp = check_part(block, phi, fr.length_to_unit(0.01));
-  const SurfaceIndex part(cp.mesh), solid(block);
-  CheckSurface c;
-  c.part = &part, c.solid = &solid, c.solid_twin = &cp.twin, c.twin_sag = cp.twin_sag;
-  c.tolerance = fr.length_to_unit(0.01), c.clearance = fr.length_to_unit(1.0);
-  c.up = Eigen::Vector3d::UnitZ();
-  for (int k = 0; k <= 30; k += 2) c.body.emplace_back(fr.length_to_unit(k), fr.length_to_unit(4.5));
+  const FlankBeforeBlock f;
+  const Similarity& fr = f.fr;
+  CheckSurface c = f.check(4.5);
   for (const bool enclose : {false, true}) {
     CAPTURE(enclose);
     const CheckProfile p = check_profile(upright_rails(fr, 5), cylinder_of(fr, 5), c, 50, 30, enclose);
