@@ -4,10 +4,13 @@
 #include <fmt/format.h>
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <iterator>
 #include <limits>
 #include <map>
 #include <numeric>
 #include <optional>
+#include <queue>
 #include <tuple>
 #include <array>
 
@@ -43,6 +46,9 @@ std::string CoverOptions::validate() const {
   if (lines < 2) return "cover.lines: at least 2";
   if (spares < 0) return "cover.spares: must be >= 0";
   if (exchanges < 0) return "cover.exchanges: must be >= 0";
+  if (regions < 0) return "cover.regions: must be >= 0";
+  if (!(region_min > 0 && region_min <= 1)) return "cover.region_min: must be in (0, 1]";
+  if (!(region_below >= 0 && region_below <= 1)) return "cover.region_below: must be in [0, 1]";
   if (patch.fit.fixed_tool && !(tool_length > 0 && std::isfinite(tool_length)))
     return "tool_length: must be positive with a fixed tool";
   if (up && !(up->norm() > 0 && up->allFinite())) return "up: must be a nonzero direction";
@@ -61,6 +67,58 @@ const char* to_string(CoverStop s) {
     case CoverStop::NoProgress: return "no further patch adds coverage";
   }
   return "?";
+}
+
+std::vector<std::vector<int>> uncovered_regions(const std::vector<std::vector<int>>& ring, const std::vector<char>& covered,
+                                                const std::vector<double>& area) {
+  std::vector<std::vector<int>> regions;
+  std::vector<char> seen(covered.size(), 0);
+  for (size_t v0 = 0; v0 < covered.size(); ++v0) {
+    if (covered[v0] || seen[v0]) continue;
+    std::vector<int> r{int(v0)};
+    seen[v0] = 1;
+    for (size_t k = 0; k < r.size(); ++k)
+      for (int w : ring[size_t(r[k])])
+        if (!covered[size_t(w)] && !seen[size_t(w)]) seen[size_t(w)] = 1, r.push_back(w);
+    std::sort(r.begin(), r.end());
+    regions.push_back(std::move(r));
+  }
+  const auto size = [&](const std::vector<int>& r) {
+    double a = 0;
+    for (int v : r) a += area[size_t(v)];
+    return a;
+  };
+  std::stable_sort(regions.begin(), regions.end(), [&](const auto& x, const auto& y) { return size(x) > size(y); });
+  return regions;
+}
+
+SubSurface sub_surface(const TriMesh& m, const std::vector<std::vector<int>>& ring, const std::vector<int>& region, double band) {
+  std::vector<double> dist(m.vertices.size(), INFINITY);
+  using Item = std::pair<double, int>;
+  std::priority_queue<Item, std::vector<Item>, std::greater<>> queue;
+  for (int v : region) dist[size_t(v)] = 0, queue.push({0.0, v});
+  while (!queue.empty()) {
+    const auto [d, v] = queue.top();
+    queue.pop();
+    if (d > dist[size_t(v)]) continue;
+    for (int w : ring[size_t(v)]) {
+      const double dw = d + (m.vertices[size_t(w)] - m.vertices[size_t(v)]).norm();
+      if (dw <= band && dw < dist[size_t(w)]) dist[size_t(w)] = dw, queue.push({dw, w});
+    }
+  }
+  SubSurface sub;
+  std::vector<int> index(m.vertices.size(), -1);
+  for (const auto& f : m.faces) {
+    if (!(std::isfinite(dist[size_t(f[0])]) && std::isfinite(dist[size_t(f[1])]) && std::isfinite(dist[size_t(f[2])]))) continue;
+    std::array<int, 3> g;
+    for (int c = 0; c < 3; ++c) {
+      int& k = index[size_t(f[size_t(c)])];
+      if (k < 0) k = int(sub.whole.size()), sub.whole.push_back(f[size_t(c)]), sub.mesh.vertices.push_back(m.vertices[size_t(f[size_t(c)])]);
+      g[size_t(c)] = k;
+    }
+    sub.mesh.faces.push_back(g);
+  }
+  return sub;
 }
 
 std::vector<AxisLine> lines_of(const Rails& rails, int count) {
@@ -599,6 +657,7 @@ struct Fitted {
   // Its tool is the fitted one cut shorter at its tip; whole_gain: what the whole tool brought.
   bool cut = false;
   double whole_gain = 0;
+  bool from_region = false;  // found by searching an uncovered region on its own
 };
 
 // A held tool's start (fixed or shared tool): the candidate's rails with the tool's axis length,
@@ -639,14 +698,25 @@ double gain_of(const PatchFit& f, const std::vector<char>& covered, const std::v
 
 // One candidate fitted, machined and trimmed where it gouges; its gain is the uncovered area it
 // brings within tolerance. From the trajectory, or from `start` (rails of an earlier fit).
-Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, const std::vector<char>& covered,
-                     const std::vector<double>& area, const CoverOptions& o, const Rails* start = nullptr) {
-  Fitted out;
+PatchOptions candidate_options(const CoverOptions& o) {
   PatchOptions po = o.patch;
   po.trim_gouges = true;  // neighbours must not overcut each other's region
   // A held tool keeps its tip at the a end: the part must not turn it round (that would be the
   // mirrored tool), the start has its holder end along `up` already.
   if (po.fit.fixed_tool) po.orient_by_part = false;
+  return po;
+}
+
+// A fitted motion machined over Φ and trimmed where it gouges; with a check surface kept out of the
+// part (with_check), rejected when no stretch keeps clear.
+PatchFit judged(const SurfaceIndex& surface, PatchFit f, const PatchOptions& po) {
+  return po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
+}
+
+Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, const std::vector<char>& covered,
+                     const std::vector<double>& area, const CoverOptions& o, const Rails* start = nullptr) {
+  Fitted out;
+  const PatchOptions po = candidate_options(o);
   if (!start && tr.a.size() < size_t(po.fit.rail_control_points)) return out;
   try {
     out.fit.trajectory = tr;
@@ -657,11 +727,7 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
     return out;  // the motion left the surface: not a patch
   }
   const FitResult fitted = out.fit.fit;  // untrimmed, its tip at the a end unless the part turned it
-  const auto judged = [&](PatchFit f) {
-    // With a check surface: kept out of the part (with_check), rejected when no stretch keeps clear.
-    return po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
-  };
-  out.fit = judged(std::move(out.fit));
+  out.fit = judged(surface, std::move(out.fit), po);
   if (machinable(out.fit)) out.gain = gain_of(out.fit, covered, area, po.tolerance), out.ok = true;
   out.whole_gain = out.gain;
   // Trimmed to less than 90% of its motion for gouging Φ, or gouging all along (not for the part,
@@ -692,7 +758,7 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
         } catch (const InputError&) {
           continue;  // what stays of the axis left Φ
         }
-        p = judged(std::move(p));
+        p = judged(surface, std::move(p), po);
         if (!machinable(p)) continue;
         const double g = gain_of(p, covered, area, po.tolerance);
         if (!out.ok || g > out.gain) out.fit = std::move(p), out.gain = g, out.ok = true, out.cut = true;
@@ -726,18 +792,10 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   Detection out;
   std::vector<PatchFit> fits;
   std::vector<double> gains;
-  std::vector<std::vector<int>> ring(nv);  // one-ring neighbours
-  for (const auto& f : m.faces)
-    for (int c = 0; c < 3; ++c) {
-      ring[size_t(f[size_t(c)])].push_back(f[size_t((c + 1) % 3)]);
-      ring[size_t(f[size_t(c)])].push_back(f[size_t((c + 2) % 3)]);
-    }
-  for (auto& r : ring) {
-    std::sort(r.begin(), r.end());
-    r.erase(std::unique(r.begin(), r.end()), r.end());
-  }
+  const std::vector<std::vector<int>> ring = vertex_rings(m);
   std::vector<char> covered(nv, 0);
   std::vector<char> tried(nv, 0);  // seed vertices already used
+  std::vector<std::vector<int>> searched_regions;  // uncovered regions searched on their own
   CoverProgress progress;
   const auto report = [&](const std::string& stage) {
     progress.stage = stage;
@@ -776,6 +834,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   std::optional<Fitted> aside;  // the patch set aside in an exchange round, and its place in `fits`
   size_t aside_at = 0;
   std::vector<char> stays;      // per patch: set aside against this union and returned
+  std::vector<char> from_region;  // per patch: found by searching an uncovered region on its own
   while (true) {
     if (out.coverage >= o.coverage) {
       out.stop = CoverStop::Coverage;
@@ -799,11 +858,13 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       if (weakest == fits.size()) break;
       ++exchanges;
       aside = Fitted{fits[weakest], least, true};
+      aside->from_region = from_region[weakest];
       aside_at = weakest;
       pool.push_back(*aside);  // a spare from now on, should another patch take its place
       fits.erase(fits.begin() + std::ptrdiff_t(weakest));
       gains.erase(gains.begin() + std::ptrdiff_t(weakest));
       stays.erase(stays.begin() + std::ptrdiff_t(weakest));
+      from_region.erase(from_region.begin() + std::ptrdiff_t(weakest));
       update_union();
       report(fmt::format("exchange {} of {}: a patch bringing {:.1f}% of its own set aside", exchanges, o.exchanges,
                          100 * least));
@@ -975,6 +1036,61 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       for (int k = 0; k < int(at_point.size()); ++k) orient_seeds(surface, at_point[size_t(k)], o);
       fit_best(candidates_of(true), o.oriented_fitted);
     }
+    // Uncovered regions this round's candidates bring little of, searched on their own (see
+    // CoverOptions::regions); a region searched once is not searched again.
+    if (!enough && o.regions > 0 && !fits.empty()) {
+      int searched = 0;
+      for (const std::vector<int>& region : uncovered_regions(ring, covered, area)) {
+        if (searched >= o.regions) break;
+        double size = 0;
+        for (int v : region) size += area[size_t(v)];
+        if (size < o.region_min) break;
+        // Searched before: a region of (nearly) the same vertices.
+        const auto same = [&](const std::vector<int>& r) {
+          std::vector<int> both;
+          std::set_intersection(r.begin(), r.end(), region.begin(), region.end(), std::back_inserter(both));
+          return 10 * both.size() >= 9 * std::max(r.size(), region.size());
+        };
+        if ((best.ok && best.gain >= o.region_below * size) || std::any_of(searched_regions.begin(), searched_regions.end(), same))
+          continue;
+        ++searched;
+        ++out.regions_searched;
+        searched_regions.push_back(region);
+        SubSurface sub = sub_surface(m, ring, region, o.band);
+        CoverOptions so = o;
+        so.coverage = 1;
+        so.max_patches = 1;
+        so.exchanges = 0;
+        so.spares = 0;
+        so.regions = 0;
+        const std::string name = fmt::format("uncovered region of {:.1f}%", 100 * size);
+        const auto forward = [&](const CoverProgress& p) {
+          progress.seed = p.seed, progress.seeds = p.seeds;
+          report(name + ": " + p.stage);
+        };
+        Detection d;
+        std::optional<SurfaceIndex> index;
+        try {
+          index.emplace(std::move(sub.mesh));
+          d = detect_patches(*index, so, forward);
+        } catch (const InputError&) {
+          continue;  // too small a piece of surface to fit on
+        }
+        out.seeds_tried += d.seeds_tried;
+        if (d.patches.empty()) continue;
+        const PatchFit& found = d.patches.front().fit;
+        // As fitted on the region, and refitted on Φ from its motion.
+        Fitted as_is;
+        as_is.fit = judged(surface, found, candidate_options(o));
+        if (machinable(as_is.fit)) as_is.ok = true, as_is.gain = as_is.whole_gain = gain_of(as_is.fit, covered, area, tol);
+        report(name + ": refitting its patch on the whole surface");
+        Fitted refit = fit_candidate(surface, found.trajectory.value_or(LineTrajectory{}), covered, area, o, &found.fit.rails);
+        ++out.seeds_tried;
+        as_is.from_region = refit.from_region = true;
+        offer(std::move(as_is));
+        offer(std::move(refit));
+      }
+    }
     // An exchange round whose best brings no more than the patch set aside (and does not reach the
     // target): that one returns to its place and stays; the next round sets aside the next weakest.
     if (aside) {
@@ -983,6 +1099,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         fits.insert(fits.begin() + std::ptrdiff_t(aside_at), std::move(aside->fit));
         gains.insert(gains.begin() + std::ptrdiff_t(aside_at), aside->gain);
         stays.insert(stays.begin() + std::ptrdiff_t(aside_at), 1);
+        from_region.insert(from_region.begin() + std::ptrdiff_t(aside_at), aside->from_region);
         aside.reset();
         update_union();
         report("exchange: no better patch, the one set aside kept");
@@ -1000,6 +1117,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     fits.push_back(std::move(best.fit));
     gains.push_back(best.gain);
     stays.push_back(0);
+    from_region.push_back(best.from_region);
     update_union();
     report("patch accepted");
     // The most promising spares only (a machined surface each).
@@ -1024,6 +1142,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     }
   }
   if (exchanges > 0) recount_gains();
+  out.from_regions = int(std::count(from_region.begin(), from_region.end(), 1));
   out.coverage_held_tool = out.coverage;
   if (sharing && fits.size() > 1) {
     // One joint refit of every patch with one tool (eq. 12 summed over the patches, the radii free

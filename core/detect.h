@@ -47,6 +47,15 @@ struct CoverOptions {
   // uncovered; the round's best patch takes the place when it brings more, else the set-aside patch
   // returns and the next weakest is tried. Not with a shared tool (the first patch holds it).
   int exchanges = 3;
+  // Uncovered regions (edge-connected, at least `region_min` of Φ's area, the largest `regions` of
+  // them) that a round's best patch brings less than `region_below` of: searched as a surface of their
+  // own (the region and `band` around it; lines explored and propagated over it alone, one patch),
+  // and that patch, judged on Φ as it is and refitted there, is a candidate of the round. Lines seeded
+  // over the whole surface reach across such a block (a twisted blade's tip at the trailing edge) into
+  // covered surface and fit neither. Not in the first round (one region: the whole surface).
+  int regions = 2;
+  double region_min = 0.01;
+  double region_below = 0.5;
   PatchOptions patch;      // fit, exploration, propagation, machined surface, tolerance
   // Tool policy (issue 14). Default: one custom tool per patch, fitted with it.
   // patch.fit.fixed_tool set (a catalogue tool): every candidate's motion is fitted to that tool,
@@ -89,6 +98,8 @@ struct Detection {
   CoverStop stop = CoverStop::NoProgress;
   int seeds_tried = 0;                  // trajectories fitted
   int exchanged = 0;                    // patches replaced by a better one in exchange rounds
+  int regions_searched = 0;             // uncovered regions searched as surfaces of their own (CoverOptions::regions)
+  int from_regions = 0;                 // patches (of the final set) that such a search found
   // shared_tool: every patch has the same tool (same radii, tip at the a end). The union's coverage
   // with the first patch's tool held, and whether the joint refit replaced it (coverage not lower).
   bool shared_tool = false;
@@ -109,6 +120,21 @@ struct UnionDeviation {
   std::vector<double> deviation;
 };
 [[nodiscard]] UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machined, size_t vertices);
+
+// The uncovered parts of a surface: edge-connected components of vertices not `covered`, each sorted,
+// by decreasing area (`area` per vertex; ties: the lowest vertex first). `ring`: one-ring neighbours.
+[[nodiscard]] std::vector<std::vector<int>> uncovered_regions(const std::vector<std::vector<int>>& ring,
+                                                              const std::vector<char>& covered,
+                                                              const std::vector<double>& area);
+
+// A region of a mesh with what lies within `band` of it along edges: the faces whose corners all lie
+// there, as a surface of its own (same coordinates), and per vertex its index in the mesh.
+struct SubSurface {
+  TriMesh mesh;
+  std::vector<int> whole;
+};
+[[nodiscard]] SubSurface sub_surface(const TriMesh& m, const std::vector<std::vector<int>>& ring,
+                                     const std::vector<int>& region, double band);
 
 // Lines through the rails at `count` uniform t (unit frame), an `init: lines` description of the motion.
 [[nodiscard]] std::vector<AxisLine> lines_of(const Rails& rails, int count);

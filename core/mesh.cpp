@@ -182,6 +182,20 @@ double surface_area(const TriMesh& m) {
   return a;
 }
 
+std::vector<std::vector<int>> vertex_rings(const TriMesh& m) {
+  std::vector<std::vector<int>> ring(m.vertices.size());
+  for (const auto& f : m.faces)
+    for (int c = 0; c < 3; ++c) {
+      ring[size_t(f[size_t(c)])].push_back(f[size_t((c + 1) % 3)]);
+      ring[size_t(f[size_t(c)])].push_back(f[size_t((c + 2) % 3)]);
+    }
+  for (auto& r : ring) {
+    std::sort(r.begin(), r.end());
+    r.erase(std::unique(r.begin(), r.end()), r.end());
+  }
+  return ring;
+}
+
 LoadedMesh clean_mesh(TriMesh mesh, const std::string& what) {
   LoadedMesh out;
   for (const auto& v : mesh.vertices)

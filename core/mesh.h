@@ -70,6 +70,9 @@ struct MeshTopology {
 };
 [[nodiscard]] MeshTopology mesh_topology(const TriMesh& mesh);
 
+// Per vertex its one-ring neighbours (sharing an edge), sorted.
+[[nodiscard]] std::vector<std::vector<int>> vertex_rings(const TriMesh& mesh);
+
 [[nodiscard]] Eigen::Vector3d face_normal(const TriMesh& mesh, int face);  // unit, zero if degenerate
 [[nodiscard]] double face_area(const TriMesh& mesh, int face);
 [[nodiscard]] double surface_area(const TriMesh& mesh);

@@ -301,6 +301,7 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   co.coverage = job.cover->coverage;
   co.max_patches = job.cover->max_patches;
   co.exchanges = job.cover->exchanges;
+  co.regions = job.cover->regions;
   co.patch.fit = fit;
   // With a part, every candidate patch is kept out of it (with_check: tip shortened, trimmed or refitted;
   // rejected when nothing stays clear), its holder at the end whose shank keeps out of the part (a
@@ -375,6 +376,8 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   c.stop = to_string(d.stop);
   c.seeds_tried = d.seeds_tried;
   c.exchanged = d.exchanged;
+  c.regions_searched = d.regions_searched;
+  c.from_regions = d.from_regions;
   c.one_tool = d.shared_tool;
   c.coverage_held_tool = d.coverage_held_tool;
   c.joint_refit = d.joint_refit;
@@ -856,10 +859,11 @@ std::string tool_label(const Job& job, const FittedPatch& p) {
 
 std::string cover_summary(const Job& job, const FittedJob& f) {
   if (!f.cover) return {};
-  return fmt::format("whole surface: {} patches{}, {:.1f}% within {} mm (stopped: {}{})", f.patches.size(),
+  return fmt::format("whole surface: {} patches{}, {:.1f}% within {} mm (stopped: {}{}{})", f.patches.size(),
                      job.tool.catalogue ? ", one catalogue tool" : job.tool.shared ? ", one shared tool" : "",
                      100 * f.cover->coverage, job.tolerance_mm, f.cover->stop,
-                     f.cover->exchanged > 0 ? fmt::format("; {} exchanged for better", f.cover->exchanged) : "");
+                     f.cover->exchanged > 0 ? fmt::format("; {} exchanged for better", f.cover->exchanged) : "",
+                     f.cover->from_regions > 0 ? fmt::format("; {} found in uncovered regions searched alone", f.cover->from_regions) : "");
 }
 
 namespace {
@@ -887,6 +891,9 @@ nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
           {"max_patches", job.cover->max_patches},
           {"exchanges", job.cover->exchanges},
           {"patches_exchanged", c.exchanged},
+          {"regions", job.cover->regions},
+          {"regions_searched", c.regions_searched},
+          {"patches_from_regions", c.from_regions},
           {"patches", f.patches.size()},
           {"stop", c.stop},
           {"tolerance_mm", job.tolerance_mm},

@@ -60,6 +60,8 @@ struct CoverResult {
   std::string stop;                   // coverage reached, max patches, no progress
   int seeds_tried = 0;
   int exchanged = 0;                  // patches replaced in exchange rounds (cover.exchanges)
+  int regions_searched = 0;           // uncovered regions searched on their own (cover.regions)
+  int from_regions = 0;               // patches kept that such a search found
   // tool: {shared: true} (or a catalogue tool): one tool for every patch. Shared: the coverage with
   // the first patch's tool held for the others, and whether the joint refit of all patches was kept.
   bool one_tool = false;

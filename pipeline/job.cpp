@@ -362,8 +362,8 @@ Job read_job(const std::filesystem::path& file) {
       if (root[k]) r.fail(root[k], k, "not with patches: auto (list the patches, e.g. from detected-job.yaml)");
     CoverJob& c = job.cover.emplace();
     if (const YAML::Node cv = root["cover"]) {
-      if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8, exchanges: 3}");
-      r.only_keys(cv, "cover", {"coverage", "max_patches", "exchanges"});
+      if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8, exchanges: 3, regions: 2}");
+      r.only_keys(cv, "cover", {"coverage", "max_patches", "exchanges", "regions"});
       if (cv["coverage"]) {
         c.coverage = r.number(cv["coverage"], "cover.coverage");
         if (!(c.coverage > 0 && c.coverage <= 1))
@@ -371,6 +371,7 @@ Job read_job(const std::filesystem::path& file) {
       }
       if (cv["max_patches"]) c.max_patches = r.integer(cv["max_patches"], "cover.max_patches", 1, 32);
       if (cv["exchanges"]) c.exchanges = r.integer(cv["exchanges"], "cover.exchanges", 0, 16);
+      if (cv["regions"]) c.regions = r.integer(cv["regions"], "cover.regions", 0, 8);
     }
     return job;
   }

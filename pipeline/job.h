@@ -47,11 +47,12 @@ struct PostJob {
   bool setup_auto = false;
 };
 
-// `patches: auto`: the patches are detected (core/detect.h), optional `cover: {coverage, max_patches, exchanges}`.
+// `patches: auto`: the patches are detected (core/detect.h), optional `cover: {coverage, max_patches, exchanges, regions}`.
 struct CoverJob {
   double coverage = 0.95;  // share of the surface's area to bring within the tolerance, (0, 1]
   int max_patches = 8;     // 1 .. 32
   int exchanges = 3;       // 0 .. 16: rounds at max_patches that try to replace the weakest patch
+  int regions = 2;         // 0 .. 8: uncovered regions per round searched as surfaces of their own (CoverOptions::regions)
 };
 
 // `tool:` beyond shape and control points (mm, deg): limits on a custom tool, enforced in the fit;

@@ -241,6 +241,15 @@ TEST_CASE("cover options name the bad field") {
   o.oriented_fitted = 0;
   CHECK(o.validate().empty());  // no oriented pool
   o = {};
+  o.regions = -1;
+  CHECK(o.validate().find("cover.regions") != std::string::npos);
+  o = {};
+  o.region_min = 0;
+  CHECK(o.validate().find("cover.region_min") != std::string::npos);
+  o = {};
+  o.region_below = 2;
+  CHECK(o.validate().find("cover.region_below") != std::string::npos);
+  o = {};
   o.max_patches = 0;
   test::ExactEnvelope ex = test::exact_envelope("arc", cylinder_profile(6), 20, 40);
   const SurfaceIndex surface(ex.unit_mesh);
@@ -257,6 +266,41 @@ TEST_CASE("the union deviation keeps the deepest cut and names its patch") {
   CHECK(u.deviation[0] == 1e-5);
   CHECK(u.deviation[2] == -1e-5);
   CHECK(u.deviation[3] == -2e-5);
+}
+
+TEST_CASE("uncovered regions: connected parts of what is left, largest first, each cut out with a band around it") {
+  // A unit square, 11 x 11 vertices 0.1 apart. Covered: the column x = 0.5 and the row y = 0.5 on
+  // its right half, leaving a left block (5 x 11 vertices), and two right blocks of 5 x 5.
+  const TriMesh m = test::grid_mesh(11, 11, [](int i, int j) { return Eigen::Vector3d(0.1 * i, 0.1 * j, 0); });
+  std::vector<char> covered(m.vertices.size(), 0);
+  for (int j = 0; j < 11; ++j) covered[size_t(j * 11 + 5)] = 1;
+  for (int i = 5; i < 11; ++i) covered[size_t(5 * 11 + i)] = 1;
+  const std::vector<double> area(m.vertices.size(), 1.0);
+  const auto ring = vertex_rings(m);
+  CHECK(ring[0] == std::vector<int>{1, 11, 12});
+  const auto regions = uncovered_regions(ring, covered, area);
+  REQUIRE(regions.size() == 3);
+  CHECK(regions[0].size() == 55);
+  CHECK(regions[1].size() == 25);
+  CHECK(regions[2].size() == 25);
+  CHECK(regions[1].front() == 6);   // the lower right block before the upper one (lowest vertex)
+  CHECK(regions[2].front() == 72);
+  CHECK(std::is_sorted(regions[0].begin(), regions[0].end()));
+  // The lower right block (x 0.6 .. 1, y 0 .. 0.4) with 0.15 along edges around it: x 0.5 .. 1,
+  // y 0 .. 0.5 but for the corner (0.5, 0.5), 0.2 away along edges: 35 vertices, 49 triangles;
+  // coordinates and indices into the whole mesh kept.
+  const SubSurface sub = sub_surface(m, ring, regions[1], 0.15);
+  CHECK(sub.mesh.vertices.size() == 35);
+  CHECK(sub.mesh.faces.size() == 49);
+  REQUIRE(sub.whole.size() == 35);
+  for (size_t v = 0; v < sub.whole.size(); ++v) CHECK(sub.mesh.vertices[v] == m.vertices[size_t(sub.whole[v])]);
+  CHECK(std::find(sub.whole.begin(), sub.whole.end(), 5 * 11 + 5) == sub.whole.end());
+  CHECK(surface_area(sub.mesh) == doctest::Approx(0.245));
+  // No band: the block alone (4 x 4 squares); a band short of one edge adds nothing.
+  CHECK(sub_surface(m, ring, regions[1], 0).mesh.faces.size() == 32);
+  CHECK(sub_surface(m, ring, regions[1], 0.099).mesh.faces.size() == 32);
+  // Nothing uncovered: no region.
+  CHECK(uncovered_regions(ring, std::vector<char>(m.vertices.size(), 1), area).empty());
 }
 
 TEST_CASE("propagation from a line off the true axis runs to the surface boundary on every analytic motion") {

@@ -120,7 +120,7 @@ TEST_CASE("rail and meridian control points: errors name the job's key and line,
 TEST_CASE("read_job: patches auto with cover options, and surface given as a mapping") {
   test::ScratchDir dir("job-auto");
   test::write_text(dir.file("s.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
-  test::write_text(dir.file("job.yaml"), "surface: {file: s.obj}\ncover: {coverage: 0.8, max_patches: 3, exchanges: 0}\npatches: auto\n");
+  test::write_text(dir.file("job.yaml"), "surface: {file: s.obj}\ncover: {coverage: 0.8, max_patches: 3, exchanges: 0, regions: 0}\npatches: auto\n");
   const pipeline::Job job = pipeline::read_job(dir.file("job.yaml"));
   CHECK(job.surface.filename() == "s.obj");
   CHECK(job.patches.empty());
@@ -128,16 +128,20 @@ TEST_CASE("read_job: patches auto with cover options, and surface given as a map
   CHECK(job.cover->coverage == 0.8);
   CHECK(job.cover->max_patches == 3);
   CHECK(job.cover->exchanges == 0);
+  CHECK(job.cover->regions == 0);
   test::write_text(dir.file("job2.yaml"), "surface: s.obj\npatches: auto\n");
   const pipeline::Job defaults = pipeline::read_job(dir.file("job2.yaml"));
   REQUIRE(defaults.cover.has_value());
   CHECK(defaults.cover->coverage == 0.95);
   CHECK(defaults.cover->max_patches == 8);
   CHECK(defaults.cover->exchanges == 3);
+  CHECK(defaults.cover->regions == 2);
   test::write_text(dir.file("job3.yaml"), "surface: s.obj\npatches: auto\ncover: {exchanges: 17}\n");
   CHECK(test::job_error(dir.file("job3.yaml")).find(dir.file("job3.yaml") + ":3: cover.exchanges") == 0);
+  test::write_text(dir.file("job5.yaml"), "surface: s.obj\npatches: auto\ncover: {regions: -1}\n");
+  CHECK(test::job_error(dir.file("job5.yaml")).find(dir.file("job5.yaml") + ":3: cover.regions") == 0);
   test::write_text(dir.file("job4.yaml"), "surface: s.obj\npatches: auto\ncover: 0.9\n");
   CHECK(test::job_error(dir.file("job4.yaml")) ==
-        dir.file("job4.yaml") + ":3: cover: expected {coverage: 0.95, max_patches: 8, exchanges: 3}");
+        dir.file("job4.yaml") + ":3: cover: expected {coverage: 0.95, max_patches: 8, exchanges: 3, regions: 2}");
   CHECK(error_of(dir, "cover: {max_patches: 3}") == dir.file("job.yaml") + ":1: cover: only with patches: auto");
 }
