@@ -220,6 +220,37 @@ TEST_CASE("two exact envelopes side by side need two patches, in order along the
   CHECK(first_half_by_1 > first_half / 2);
 }
 
+TEST_CASE("an uncovered region searched as a surface of its own gives a candidate the round can take" * doctest::test_suite("heavy")) {
+  // The two envelopes of the test above; once the first patch covers one, the other is an uncovered
+  // region. Searched always (region_below 1): it is searched once, and the patch found on it alone
+  // (its lines within it) is the second patch and covers more than the whole surface's best
+  // (97.2% against 96.3%).
+  AnalyticMotionOptions mo;
+  mo.kind = "twist";
+  const LineMotion m = analytic_motion(mo);
+  const EnvelopeGrid g1 = envelope_grid(m, cylinder_profile(6), 30, 60, 1, 0.0, 0.5);
+  const EnvelopeGrid g2 = envelope_grid(m, cone_profile(4, 9), 30, 60, 1, 0.5, 1.0);
+  const TriMesh both = test::merged(g1.mesh, g2.mesh);
+  const Similarity frame = unit_diagonal_frame(both);
+  const SurfaceIndex surface(transformed(both, frame));
+  CoverOptions o;
+  o.patch.tolerance = 2e-4;
+  o.max_patches = 2;
+  o.region_below = 1;
+  const Detection d = detect_patches(surface, o);
+  o.regions = 0;
+  const Detection without = detect_patches(surface, o);
+  MESSAGE("regions searched ", d.regions_searched, ", patches from them ", d.from_regions, ": coverage ", d.coverage,
+          " (without: ", without.coverage, ")");
+  CHECK(without.regions_searched == 0);
+  CHECK(d.regions_searched == 1);
+  CHECK(d.patches.size() == 2);
+  CHECK(d.from_regions == 1);
+  CHECK(d.coverage > without.coverage + 0.005);
+  CHECK(d.coverage >= 0.97);
+  CHECK(worst_overcut(d) <= 2e-4);
+}
+
 TEST_CASE("cover options name the bad field") {
   CoverOptions o;
   CHECK(o.validate().empty());
