@@ -22,6 +22,7 @@ Without a browser it exits 77 (CTest: skipped) unless FLANKCAM_REQUIRE_BROWSER=1
 import json
 import argparse
 import base64
+import concurrent.futures
 import os
 import re
 import shutil
@@ -126,7 +127,11 @@ class Browser:
 
 def check_state(browser, page, fragment, png, failures):
     url = "file://" + page + fragment
-    dom, console = browser.dom(url)
+    # The DOM and the screenshot from two Chromium processes at once (each mostly waits).
+    with concurrent.futures.ThreadPoolExecutor(max_workers=2) as pool:
+        shot = pool.submit(browser.screenshot, url, png)
+        dom, console = browser.dom(url)
+        width, height, rows = shot.result()
     state = re.search(r'<body[^>]*data-flankcam-viewer="([^"]*)"', dom)
     label = re.search(r'<span id="fcv-frame">([^<]*)</span>', dom)
     print(f"{fragment}: data-flankcam-viewer={state.group(1) if state else None!r}, "
@@ -135,7 +140,6 @@ def check_state(browser, page, fragment, png, failures):
         failures.append(f"{fragment}: data-flankcam-viewer is {state.group(1) if state else 'missing'!r}, not 'ready'")
     for line in console:
         failures.append(f"{fragment}: console: {line}")
-    width, height, rows = browser.screenshot(url, png)
     counts = {"within": 0, "under": 0, "over": 0}
     canvas = rows[:min(height, CANVAS_HEIGHT)]
     for row in canvas:
