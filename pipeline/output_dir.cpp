@@ -2,12 +2,17 @@
 
 #include <fmt/format.h>
 #include <limits.h>
+#include <pthread.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <map>
+#include <mutex>
+#include <thread>
 
 #include "core/errors.h"
 
@@ -38,6 +43,51 @@ std::string why(int err) { return std::strerror(err); }
 [[noreturn]] void refuse(const fs::path& target, const std::string& what) {
   throw InputError(fmt::format("--out {}: {}", target.string(), what));
 }
+
+// Output folders not yet committed: what an interrupt (Ctrl-C, SIGTERM, SIGHUP) removes before the
+// process ends, so that a run stopped by its user leaves nothing behind either. The signals are
+// blocked in the thread that makes the first OutputDir (the main thread, before any worker
+// thread exists, so every later thread inherits the mask) and taken by one thread waiting for them.
+struct Unfinished {
+  fs::path staging;
+  std::vector<fs::path> created;
+};
+struct Registry {
+  std::mutex mutex;
+  std::map<const void*, Unfinished> live;
+};
+Registry& registry() {
+  static Registry* r = new Registry;  // never destroyed: the waiting thread may use it at exit
+  return *r;
+}
+
+void remove_unfinished(const Unfinished& u) {
+  std::error_code ignored;
+  fs::remove_all(u.staging, ignored);
+  for (auto it = u.created.rbegin(); it != u.created.rend(); ++it) ::rmdir(it->c_str());
+}
+
+void watch_interrupts() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    sigset_t set;
+    sigemptyset(&set);
+    for (int s : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&set, s);
+    if (pthread_sigmask(SIG_BLOCK, &set, nullptr) != 0) return;
+    std::thread([set] {
+      int sig = 0;
+      if (sigwait(&set, &sig) != 0) return;
+      {
+        std::lock_guard<std::mutex> lock(registry().mutex);
+        for (const auto& [who, u] : registry().live) remove_unfinished(u);
+      }
+      const std::string line = fmt::format("flankcam: interrupted ({}); nothing written to the output folder\n",
+                                           sig == SIGINT ? "SIGINT" : sig == SIGTERM ? "SIGTERM" : "SIGHUP");
+      (void)!::write(STDERR_FILENO, line.data(), line.size());
+      ::_exit(128 + sig);
+    }).detach();
+  });
+}
 }  // namespace
 
 OutputDir::OutputDir(const fs::path& target) : target_(target) {
@@ -60,6 +110,9 @@ OutputDir::OutputDir(const fs::path& target) : target_(target) {
   const fs::file_status st = fs::status(target, ec);
   if (fs::exists(st) && !fs::is_directory(st)) refuse(shown, "exists and is not a folder");
 
+  // From here on, an interrupt removes what this object creates (not before it is registered).
+  watch_interrupts();
+  std::lock_guard<std::mutex> lock(registry().mutex);
   fs::path parent;
   std::string pattern;
   if (fs::is_directory(st)) {
@@ -97,13 +150,13 @@ OutputDir::OutputDir(const fs::path& target) : target_(target) {
   }
   staging_ = pattern;
   if (!into_existing_) target_ = resolved;
+  registry().live[this] = {staging_, created_};
 }
 
 OutputDir::~OutputDir() {
-  if (committed_) return;
-  std::error_code ignored;
-  fs::remove_all(staging_, ignored);
-  for (auto it = created_.rbegin(); it != created_.rend(); ++it) ::rmdir(it->c_str());
+  std::lock_guard<std::mutex> lock(registry().mutex);
+  registry().live.erase(this);
+  if (!committed_) remove_unfinished({staging_, created_});
 }
 
 std::string OutputDir::file(const std::string& name) {
@@ -118,6 +171,8 @@ std::string OutputDir::file(const std::string& name) {
 
 void OutputDir::commit() {
   if (committed_) return;
+  // An interrupt during the move waits for it: the output is then whole.
+  std::lock_guard<std::mutex> lock(registry().mutex);
   if (!into_existing_) {
     // mkdtemp made the folder 0700; a finished output folder gets the usual 0777 minus the umask.
     const mode_t mask = ::umask(0);
@@ -125,6 +180,7 @@ void OutputDir::commit() {
     ::chmod(staging_.c_str(), 0777 & ~mask);
     if (::rename(staging_.c_str(), target_.c_str()) == 0) {
       committed_ = true;
+      registry().live.erase(this);
       return;
     }
     const int err = errno;
@@ -141,6 +197,7 @@ void OutputDir::commit() {
   std::error_code ignored;
   fs::remove_all(staging_, ignored);
   committed_ = true;
+  registry().live.erase(this);
 }
 
 }  // namespace flankcam::pipeline

@@ -182,3 +182,43 @@ TEST_CASE("a write failure late in a run leaves nothing: no folder, no programs,
   CHECK(test::read_text(dir.file("ok/p1.ngc")) == "old program");
   CHECK(program.find("G93") != std::string::npos);
 }
+
+TEST_CASE("a run stopped by SIGTERM or SIGINT leaves neither its output folder nor the private one nor parents it made") {
+  test::ScratchDir dir("out-interrupted");
+  const std::string job = blade_job(dir);
+  for (const int sig : {SIGTERM, SIGINT}) {
+    CAPTURE(sig);
+    const fs::path made = dir.file("new"), out = made / "deeper" / "out";
+    const std::string err = dir.file("err.txt");
+    const pid_t pid = fork();
+    if (pid == 0) {
+      signal(SIGINT, SIG_DFL);  // a shell may have started the tests with SIGINT ignored
+      signal(SIGTERM, SIG_DFL);
+      if (!freopen(err.c_str(), "w", stderr) || !freopen("/dev/null", "w", stdout)) _exit(98);
+      execl(FLANKCAM_BINARY, FLANKCAM_BINARY, "run", job.c_str(), "--out", out.c_str(), static_cast<char*>(nullptr));
+      _exit(99);
+    }
+    // Once the run has made its private folder beside the target (the fit follows), it is stopped.
+    int status = 0;
+    bool stopped_early = false;
+    for (;;) {
+      std::error_code ec;
+      bool staging = false;
+      for (const auto& e : fs::directory_iterator(made / "deeper", ec))
+        staging |= e.path().filename().string().rfind(".out.flankcam-", 0) == 0;
+      if (staging) break;
+      if (waitpid(pid, &status, WNOHANG) == pid) {
+        stopped_early = true;  // finished (or failed) before it could be stopped
+        break;
+      }
+      usleep(1000);
+    }
+    REQUIRE_FALSE(stopped_early);
+    REQUIRE(kill(pid, sig) == 0);
+    REQUIRE(waitpid(pid, &status, 0) == pid);
+    REQUIRE(WIFEXITED(status));
+    CHECK(WEXITSTATUS(status) == 128 + sig);
+    CHECK(test::read_text(err).find("flankcam: interrupted") != std::string::npos);
+    CHECK_FALSE(fs::exists(made));  // the private folder, the parents `new` and `deeper` it created: gone
+  }
+}
