@@ -68,26 +68,23 @@ const char* to_string(CoverStop s) {
   return "?";
 }
 
-std::vector<std::vector<int>> uncovered_regions(const std::vector<std::vector<int>>& ring, const std::vector<char>& covered,
-                                                const std::vector<double>& area) {
-  std::vector<std::vector<int>> regions;
+std::vector<Region> uncovered_regions(const std::vector<std::vector<int>>& ring, const std::vector<char>& covered,
+                                      const std::vector<double>& area) {
+  std::vector<Region> regions;
   std::vector<char> seen(covered.size(), 0);
   for (size_t v0 = 0; v0 < covered.size(); ++v0) {
     if (covered[v0] || seen[v0]) continue;
-    std::vector<int> r{int(v0)};
+    Region r;
+    r.vertices = {int(v0)};
     seen[v0] = 1;
-    for (size_t k = 0; k < r.size(); ++k)
-      for (int w : ring[size_t(r[k])])
-        if (!covered[size_t(w)] && !seen[size_t(w)]) seen[size_t(w)] = 1, r.push_back(w);
-    std::sort(r.begin(), r.end());
+    for (size_t k = 0; k < r.vertices.size(); ++k)
+      for (int w : ring[size_t(r.vertices[k])])
+        if (!covered[size_t(w)] && !seen[size_t(w)]) seen[size_t(w)] = 1, r.vertices.push_back(w);
+    std::sort(r.vertices.begin(), r.vertices.end());
+    for (int v : r.vertices) r.area += area[size_t(v)];
     regions.push_back(std::move(r));
   }
-  const auto size = [&](const std::vector<int>& r) {
-    double a = 0;
-    for (int v : r) a += area[size_t(v)];
-    return a;
-  };
-  std::stable_sort(regions.begin(), regions.end(), [&](const auto& x, const auto& y) { return size(x) > size(y); });
+  std::stable_sort(regions.begin(), regions.end(), [](const Region& x, const Region& y) { return x.area > y.area; });
   return regions;
 }
 
@@ -1039,10 +1036,8 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     // CoverOptions::regions); a region searched once is not searched again.
     if (!enough && o.regions > 0 && !fits.empty()) {
       int searched = 0;
-      for (const std::vector<int>& region : uncovered_regions(ring, covered, area)) {
+      for (const auto& [region, size] : uncovered_regions(ring, covered, area)) {
         if (searched >= o.regions) break;
-        double size = 0;
-        for (int v : region) size += area[size_t(v)];
         if (size < o.region_min) break;
         // Searched before: a region of (nearly) the same vertices.
         const auto same = [&](const std::vector<int>& r) {

@@ -121,11 +121,15 @@ struct UnionDeviation {
 };
 [[nodiscard]] UnionDeviation union_deviation(const std::vector<const MachinedSurface*>& machined, size_t vertices);
 
-// The uncovered parts of a surface: edge-connected components of vertices not `covered`, each sorted,
-// by decreasing area (`area` per vertex; ties: the lowest vertex first). `ring`: one-ring neighbours.
-[[nodiscard]] std::vector<std::vector<int>> uncovered_regions(const std::vector<std::vector<int>>& ring,
-                                                              const std::vector<char>& covered,
-                                                              const std::vector<double>& area);
+// The uncovered parts of a surface: edge-connected components of vertices not `covered` (vertices
+// sorted, area the sum of `area` over them), by decreasing area (ties: the lowest vertex first).
+// `ring`: one-ring neighbours.
+struct Region {
+  std::vector<int> vertices;
+  double area = 0;
+};
+[[nodiscard]] std::vector<Region> uncovered_regions(const std::vector<std::vector<int>>& ring, const std::vector<char>& covered,
+                                                    const std::vector<double>& area);
 
 // A region of a mesh with what lies within `band` of it along edges: the faces whose corners all lie
 // there, as a surface of its own (same coordinates), and per vertex its index in the mesh.

@@ -190,19 +190,29 @@ TEST_CASE("auto detection is deterministic" * doctest::test_suite("heavy")) {
     }
 }
 
+namespace {
+// Two envelopes of different tools along the same s-curve, one after the other in x, as one mesh
+// (unit frame); the first `first` vertices are the first envelope's.
+struct TwoEnvelopes {
+  int first = 0;
+  SurfaceIndex surface{TriMesh{}};
+  TwoEnvelopes() {
+    AnalyticMotionOptions mo;
+    mo.kind = "twist";
+    const LineMotion m = analytic_motion(mo);
+    const EnvelopeGrid g1 = envelope_grid(m, cylinder_profile(6), 30, 60, 1, 0.0, 0.5);
+    const EnvelopeGrid g2 = envelope_grid(m, cone_profile(4, 9), 30, 60, 1, 0.5, 1.0);
+    first = int(g1.mesh.vertices.size());
+    const TriMesh both = test::merged(g1.mesh, g2.mesh);
+    surface = SurfaceIndex(transformed(both, unit_diagonal_frame(both)));
+  }
+};
+}  // namespace
+
 TEST_CASE("two exact envelopes side by side need two patches, in order along the surface, each owning its part" * doctest::test_suite("heavy")) {
-  // Two envelopes of different tools along the same s-curve, one after the other in x, joined into one mesh.
-  AnalyticMotionOptions mo;
-  mo.kind = "twist";
-  const LineMotion m = analytic_motion(mo);
-  const EnvelopeGrid g1 = envelope_grid(m, cylinder_profile(6), 30, 60, 1, 0.0, 0.5);
-  const EnvelopeGrid g2 = envelope_grid(m, cone_profile(4, 9), 30, 60, 1, 0.5, 1.0);
-  TriMesh both = g1.mesh;
-  const int off = int(both.vertices.size());
-  both.vertices.insert(both.vertices.end(), g2.mesh.vertices.begin(), g2.mesh.vertices.end());
-  for (auto f : g2.mesh.faces) both.faces.push_back({f[0] + off, f[1] + off, f[2] + off});
-  const Similarity frame = unit_diagonal_frame(both);
-  const SurfaceIndex surface(transformed(both, frame));
+  const TwoEnvelopes two;
+  const SurfaceIndex& surface = two.surface;
+  const int off = two.first;
   CoverOptions o;
   o.patch.tolerance = 2e-4;
   o.max_patches = 3;
@@ -225,14 +235,8 @@ TEST_CASE("an uncovered region searched as a surface of its own gives a candidat
   // region. Searched always (region_below 1): it is searched once, and the patch found on it alone
   // (its lines within it) is the second patch and covers more than the whole surface's best
   // (97.2% against 96.3%).
-  AnalyticMotionOptions mo;
-  mo.kind = "twist";
-  const LineMotion m = analytic_motion(mo);
-  const EnvelopeGrid g1 = envelope_grid(m, cylinder_profile(6), 30, 60, 1, 0.0, 0.5);
-  const EnvelopeGrid g2 = envelope_grid(m, cone_profile(4, 9), 30, 60, 1, 0.5, 1.0);
-  const TriMesh both = test::merged(g1.mesh, g2.mesh);
-  const Similarity frame = unit_diagonal_frame(both);
-  const SurfaceIndex surface(transformed(both, frame));
+  const TwoEnvelopes two;
+  const SurfaceIndex& surface = two.surface;
   CoverOptions o;
   o.patch.tolerance = 2e-4;
   o.max_patches = 2;
@@ -311,16 +315,18 @@ TEST_CASE("uncovered regions: connected parts of what is left, largest first, ea
   CHECK(ring[0] == std::vector<int>{1, 11, 12});
   const auto regions = uncovered_regions(ring, covered, area);
   REQUIRE(regions.size() == 3);
-  CHECK(regions[0].size() == 55);
-  CHECK(regions[1].size() == 25);
-  CHECK(regions[2].size() == 25);
-  CHECK(regions[1].front() == 6);   // the lower right block before the upper one (lowest vertex)
-  CHECK(regions[2].front() == 72);
-  CHECK(std::is_sorted(regions[0].begin(), regions[0].end()));
+  CHECK(regions[0].vertices.size() == 55);
+  CHECK(regions[1].vertices.size() == 25);
+  CHECK(regions[2].vertices.size() == 25);
+  CHECK(regions[0].area == 55.0);
+  CHECK(regions[1].area == 25.0);
+  CHECK(regions[1].vertices.front() == 6);   // the lower right block before the upper one (lowest vertex)
+  CHECK(regions[2].vertices.front() == 72);
+  CHECK(std::is_sorted(regions[0].vertices.begin(), regions[0].vertices.end()));
   // The lower right block (x 0.6 .. 1, y 0 .. 0.4) with 0.15 along edges around it: x 0.5 .. 1,
   // y 0 .. 0.5 but for the corner (0.5, 0.5), 0.2 away along edges: 35 vertices, 49 triangles;
   // coordinates and indices into the whole mesh kept.
-  const SubSurface sub = sub_surface(m, ring, regions[1], 0.15);
+  const SubSurface sub = sub_surface(m, ring, regions[1].vertices, 0.15);
   CHECK(sub.mesh.vertices.size() == 35);
   CHECK(sub.mesh.faces.size() == 49);
   REQUIRE(sub.whole.size() == 35);
@@ -328,8 +334,8 @@ TEST_CASE("uncovered regions: connected parts of what is left, largest first, ea
   CHECK(std::find(sub.whole.begin(), sub.whole.end(), 5 * 11 + 5) == sub.whole.end());
   CHECK(surface_area(sub.mesh) == doctest::Approx(0.245));
   // No band: the block alone (4 x 4 squares); a band short of one edge adds nothing.
-  CHECK(sub_surface(m, ring, regions[1], 0).mesh.faces.size() == 32);
-  CHECK(sub_surface(m, ring, regions[1], 0.099).mesh.faces.size() == 32);
+  CHECK(sub_surface(m, ring, regions[1].vertices, 0).mesh.faces.size() == 32);
+  CHECK(sub_surface(m, ring, regions[1].vertices, 0.099).mesh.faces.size() == 32);
   // Nothing uncovered: no region.
   CHECK(uncovered_regions(ring, std::vector<char>(m.vertices.size(), 1), area).empty());
 }
