@@ -1036,7 +1036,10 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     // CoverOptions::regions); a region searched once is not searched again.
     if (!enough && o.regions > 0 && !fits.empty()) {
       int searched = 0;
-      for (const auto& [region, size] : uncovered_regions(ring, covered, area)) {
+      for (const Region& uncovered : uncovered_regions(ring, covered, area)) {
+        // Named, not a structured binding: lambdas may not capture those before C++20 (clang refuses).
+        const std::vector<int>& region = uncovered.vertices;
+        const double size = uncovered.area;
         if (searched >= o.regions) break;
         if (size < o.region_min) break;
         // Searched before: a region of (nearly) the same vertices.
