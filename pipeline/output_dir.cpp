@@ -61,10 +61,15 @@ Registry& registry() {
   return *r;
 }
 
+// The parent folders a run made, newest first (each empty by then, or left as it is).
+void remove_created(const std::vector<fs::path>& created) {
+  for (auto it = created.rbegin(); it != created.rend(); ++it) ::rmdir(it->c_str());
+}
+
 void remove_unfinished(const Unfinished& u) {
   std::error_code ignored;
   fs::remove_all(u.staging, ignored);
-  for (auto it = u.created.rbegin(); it != u.created.rend(); ++it) ::rmdir(it->c_str());
+  remove_created(u.created);
 }
 
 void watch_interrupts() {
@@ -129,14 +134,14 @@ OutputDir::OutputDir(const fs::path& target) : target_(target) {
     for (const fs::path& p : missing) {
       if (::mkdir(p.c_str(), 0777) != 0) {
         const int err = errno;
-        for (auto it = created_.rbegin(); it != created_.rend(); ++it) ::rmdir(it->c_str());
+        remove_created(created_);
         created_.clear();
         refuse(shown, fmt::format("cannot create the folder {} ({})", p.string(), why(err)));
       }
       created_.push_back(p);
     }
     if (!fs::is_directory(parent, ec)) {
-      for (auto it = created_.rbegin(); it != created_.rend(); ++it) ::rmdir(it->c_str());
+      remove_created(created_);
       created_.clear();
       refuse(shown, parent.string() + " is not a folder");
     }
@@ -144,7 +149,7 @@ OutputDir::OutputDir(const fs::path& target) : target_(target) {
   }
   if (::mkdtemp(pattern.data()) == nullptr) {
     const int err = errno;
-    for (auto it = created_.rbegin(); it != created_.rend(); ++it) ::rmdir(it->c_str());
+    remove_created(created_);
     created_.clear();
     refuse(shown, "cannot write there (" + why(err) + ")");
   }
