@@ -1035,6 +1035,13 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     // Uncovered regions this round's candidates bring little of, searched on their own (see
     // CoverOptions::regions); a region searched once is not searched again.
     if (!enough && o.regions > 0 && !fits.empty()) {
+      // One patch on the region alone: no exchanges, spares or regions within it.
+      CoverOptions so = o;
+      so.coverage = 1;
+      so.max_patches = 1;
+      so.exchanges = 0;
+      so.spares = 0;
+      so.regions = 0;
       int searched = 0;
       for (const Region& uncovered : uncovered_regions(ring, covered, area)) {
         // Named, not a structured binding: lambdas may not capture those before C++20 (clang refuses).
@@ -1054,12 +1061,6 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         ++out.regions_searched;
         searched_regions.push_back(region);
         SubSurface sub = sub_surface(m, ring, region, o.band);
-        CoverOptions so = o;
-        so.coverage = 1;
-        so.max_patches = 1;
-        so.exchanges = 0;
-        so.spares = 0;
-        so.regions = 0;
         const std::string name = fmt::format("uncovered region of {:.1f}%", 100 * size);
         const auto forward = [&](const CoverProgress& p) {
           progress.seed = p.seed, progress.seeds = p.seeds;

@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <functional>
 
 #include "core/envelope.h"
 #include "core/errors.h"
@@ -258,32 +259,24 @@ TEST_CASE("an uncovered region searched as a surface of its own gives a candidat
 TEST_CASE("cover options name the bad field") {
   CoverOptions o;
   CHECK(o.validate().empty());
-  o.coverage = 1.5;
-  CHECK(o.validate().find("cover.coverage") != std::string::npos);
-  o = {};
-  o.max_patches = 0;
-  CHECK(o.validate().find("cover.max_patches") != std::string::npos);
-  o = {};
-  o.orient_below = 1.5;
-  CHECK(o.validate().find("cover.orient_below") != std::string::npos);
-  o = {};
-  o.oriented_fitted = 2 * o.oriented_explored + 1;
-  CHECK(o.validate().find("cover.oriented_fitted") != std::string::npos);
-  o = {};
+  // The default options with one field set: validate names that field.
+  const auto names = [](const char* field, const std::function<void(CoverOptions&)>& set) {
+    CoverOptions c;
+    set(c);
+    return c.validate().find(field) != std::string::npos;
+  };
+  CHECK(names("cover.coverage", [](CoverOptions& c) { c.coverage = 1.5; }));
+  CHECK(names("cover.max_patches", [](CoverOptions& c) { c.max_patches = 0; }));
+  CHECK(names("cover.orient_below", [](CoverOptions& c) { c.orient_below = 1.5; }));
+  CHECK(names("cover.oriented_fitted", [](CoverOptions& c) { c.oriented_fitted = 2 * c.oriented_explored + 1; }));
+  CHECK(names("cover.regions", [](CoverOptions& c) { c.regions = -1; }));
+  CHECK(names("cover.region_min", [](CoverOptions& c) { c.region_min = 0; }));
+  CHECK(names("cover.region_below", [](CoverOptions& c) { c.region_below = 2; }));
   o.oriented_lines = 0;
   CHECK(o.validate().find("cover.oriented_lines") != std::string::npos);
   o.oriented_explored = 0;
   o.oriented_fitted = 0;
   CHECK(o.validate().empty());  // no oriented pool
-  o = {};
-  o.regions = -1;
-  CHECK(o.validate().find("cover.regions") != std::string::npos);
-  o = {};
-  o.region_min = 0;
-  CHECK(o.validate().find("cover.region_min") != std::string::npos);
-  o = {};
-  o.region_below = 2;
-  CHECK(o.validate().find("cover.region_below") != std::string::npos);
   o = {};
   o.max_patches = 0;
   test::ExactEnvelope ex = test::exact_envelope("arc", cylinder_profile(6), 20, 40);
