@@ -52,6 +52,12 @@ PatchFit fit_patch(const SurfaceIndex& surface, const PatchSpec& spec, const Pat
     plain.check = {};
     out.fit = optimize_motion(surface, out.initial, plain);
     out.seconds_opt = seconds_since(t1);
+    // Radii that describe no tool (a meridian folding back on itself has no envelope, no end, no
+    // grinding profile): refused here, before anything is machined with them.
+    if (const std::optional<ToolDefect> d = tool_defect(out.fit.tool, out.fit.rails.length))
+      throw InputError(fmt::format("the fitted radii describe no tool: {} at {:.0f}% of its length from its tip end; set "
+                                   "tool.min_diameter and tool.max_cone_angle, or start the patch elsewhere",
+                                   d->what, 100 * d->s));
   } catch (const InputError& e) {
     throw InputError(where + e.what());
   }

@@ -540,6 +540,37 @@ TEST_CASE("tool_defect finds radii that describe no tool, and such a fit is not 
   CHECK_FALSE(machinable(f));
 }
 
+TEST_CASE("a patch whose fitted radii describe no tool is refused by name before it is machined") {
+  // A flat Φ 10 x 10 and a held tool whose waist folds its meridian (as in the test above): the fit
+  // runs, and fit_patch refuses its radii instead of handing them to the tool end ("the tool's
+  // meridian must have increasing z", naming no patch).
+  const TriMesh phi_mesh = test::grid_mesh(11, 11, [](int i, int j) { return Eigen::Vector3d(i, j, 0); });
+  const SurfaceIndex phi(phi_mesh);
+  ToolRadius waist;
+  waist.D = {0.2, 0.15, 0.15, 0.2};
+  REQUIRE(tool_defect(waist, 0.2));
+  PatchSpec spec;
+  spec.name = "fold";
+  for (double x : {2.0, 5.0, 8.0}) spec.lines.push_back({Eigen::Vector3d(x, 4, 0.2), Eigen::Vector3d(x, 4.2, 0.2)});
+  PatchOptions po;
+  po.tolerance = 1e-3;
+  po.fit.fixed_tool = waist;
+  try {
+    (void)fit_patch(phi, spec, po);
+    FAIL("fit_patch accepted a tool whose meridian folds");
+  } catch (const InputError& e) {
+    const std::string what = e.what();
+    CHECK(what.rfind("patch 'fold': the fitted radii describe no tool: its meridian turns back on itself at ", 0) == 0);
+    CHECK(what.find("set tool.min_diameter and tool.max_cone_angle") != std::string::npos);
+  }
+  // The same lines with a tool that is one (the waist on a longer axis) fit and machine.
+  spec.length = 0.3;
+  REQUIRE_FALSE(tool_defect(waist, 0.3));
+  const PatchFit ok = fit_patch(phi, spec, po);
+  CHECK(ok.fit.tool.D == waist.D);
+  CHECK(std::abs(ok.fit.rails.length - 0.3) < 1e-12);
+}
+
 TEST_CASE("constrained_tool projects random radii onto every constraint row") {
   std::mt19937 rng(7);
   std::uniform_real_distribution<double> u(0.01, 0.2);
