@@ -786,8 +786,14 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   const Eigen::Matrix3d extents = extent_axes(m);
   const double tol = o.patch.tolerance;
   Detection out;
-  std::vector<PatchFit> fits;
-  std::vector<double> gains;
+  // The patches of the cover, in the order found.
+  struct Chosen {
+    PatchFit fit;
+    double gain = 0;           // what it brings first, in this order
+    bool stays = false;        // set aside against this union and returned
+    bool from_region = false;  // found by searching an uncovered region on its own
+  };
+  std::vector<Chosen> chosen;
   const std::vector<std::vector<int>> ring = vertex_rings(m);
   std::vector<char> covered(nv, 0);
   std::vector<char> tried(nv, 0);  // seed vertices already used
@@ -795,13 +801,13 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   CoverProgress progress;
   const auto report = [&](const std::string& stage) {
     progress.stage = stage;
-    progress.patches = int(fits.size());
+    progress.patches = int(chosen.size());
     progress.coverage = out.coverage;
     if (on_progress) on_progress(progress);
   };
   const auto update_union = [&]() {
     std::vector<const MachinedSurface*> ms;
-    for (const PatchFit& f : fits) ms.push_back(&f.machined);
+    for (const Chosen& c : chosen) ms.push_back(&c.fit.machined);
     UnionDeviation u = union_deviation(ms, nv);
     out.owner = std::move(u.owner);
     out.deviation = std::move(u.deviation);
@@ -812,10 +818,10 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   // What each patch brings first, in the order they were found (after patches were exchanged or refitted).
   const auto recount_gains = [&]() {
     std::fill(covered.begin(), covered.end(), 0);
-    for (size_t k = 0; k < fits.size(); ++k) {
-      gains[k] = gain_of(fits[k], covered, area, tol);
+    for (Chosen& c : chosen) {
+      c.gain = gain_of(c.fit, covered, area, tol);
       for (size_t v = 0; v < nv; ++v) {
-        const double d = fits[k].machined.design_deviation[v];
+        const double d = c.fit.machined.design_deviation[v];
         covered[v] |= std::isfinite(d) && std::abs(d) <= tol;
       }
     }
@@ -827,40 +833,35 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   // fitted with their own tools, to be refitted with it (restarts).
   std::vector<Fitted> pool, restarts;
   int exchanges = 0;
-  std::optional<Fitted> aside;  // the patch set aside in an exchange round, and its place in `fits`
+  std::optional<Fitted> aside;  // the patch set aside in an exchange round, and its place in `chosen`
   size_t aside_at = 0;
-  std::vector<char> stays;      // per patch: set aside against this union and returned
-  std::vector<char> from_region;  // per patch: found by searching an uncovered region on its own
   while (true) {
     if (out.coverage >= o.coverage) {
       out.stop = CoverStop::Coverage;
       break;
     }
-    if (int(fits.size()) >= o.max_patches) {
+    if (int(chosen.size()) >= o.max_patches) {
       out.stop = CoverStop::MaxPatches;
       if (sharing || exchanges >= o.exchanges) break;
       // An exchange round: of the patches not yet set aside against this union, the one whose own
       // share (what no other patch covers) is least is set aside.
-      size_t weakest = fits.size();
+      size_t weakest = chosen.size();
       double least = INFINITY;
-      for (size_t k = 0; k < fits.size(); ++k) {
-        if (stays[k]) continue;
+      for (size_t k = 0; k < chosen.size(); ++k) {
+        if (chosen[k].stays) continue;
         std::vector<const MachinedSurface*> others;
-        for (size_t j = 0; j < fits.size(); ++j)
-          if (j != k) others.push_back(&fits[j].machined);
+        for (size_t j = 0; j < chosen.size(); ++j)
+          if (j != k) others.push_back(&chosen[j].fit.machined);
         const double own = out.coverage - coverage(m, union_deviation(others, nv).deviation, tol);
         if (own < least) least = own, weakest = k;
       }
-      if (weakest == fits.size()) break;
+      if (weakest == chosen.size()) break;
       ++exchanges;
-      aside = Fitted{fits[weakest], least, true};
-      aside->from_region = from_region[weakest];
+      aside = Fitted{chosen[weakest].fit, least, true};
+      aside->from_region = chosen[weakest].from_region;
       aside_at = weakest;
       pool.push_back(*aside);  // a spare from now on, should another patch take its place
-      fits.erase(fits.begin() + std::ptrdiff_t(weakest));
-      gains.erase(gains.begin() + std::ptrdiff_t(weakest));
-      stays.erase(stays.begin() + std::ptrdiff_t(weakest));
-      from_region.erase(from_region.begin() + std::ptrdiff_t(weakest));
+      chosen.erase(chosen.begin() + std::ptrdiff_t(weakest));
       update_union();
       report(fmt::format("exchange {} of {}: a patch bringing {:.1f}% of its own set aside", exchanges, o.exchanges,
                          100 * least));
@@ -1034,7 +1035,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     }
     // Uncovered regions this round's candidates bring little of, searched on their own (see
     // CoverOptions::regions); a region searched once is not searched again.
-    if (!enough && o.regions > 0 && !fits.empty()) {
+    if (!enough && o.regions > 0 && !chosen.empty()) {
       // One patch on the region alone: no exchanges, spares or regions within it.
       CoverOptions so = o;
       so.coverage = 1;
@@ -1094,17 +1095,14 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     if (aside) {
       const bool better = best.ok && (best.gain > aside->gain + 1e-4 || out.coverage + best.gain >= o.coverage);
       if (!better) {
-        fits.insert(fits.begin() + std::ptrdiff_t(aside_at), std::move(aside->fit));
-        gains.insert(gains.begin() + std::ptrdiff_t(aside_at), aside->gain);
-        stays.insert(stays.begin() + std::ptrdiff_t(aside_at), 1);
-        from_region.insert(from_region.begin() + std::ptrdiff_t(aside_at), aside->from_region);
+        chosen.insert(chosen.begin() + std::ptrdiff_t(aside_at), Chosen{std::move(aside->fit), aside->gain, true, aside->from_region});
         aside.reset();
         update_union();
         report("exchange: no better patch, the one set aside kept");
         continue;
       }
       aside.reset();
-      std::fill(stays.begin(), stays.end(), 0);  // a new union: each may be the weakest again
+      for (Chosen& c : chosen) c.stays = false;  // a new union: each may be the weakest again
       ++out.exchanged;
     } else if (!best.ok || best.gain < 0.005) {  // a patch must bring a real share of the surface (0.5%)
       // Nothing from these seeds: the next round takes the next-best ones (these are marked tried).
@@ -1112,21 +1110,18 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       continue;
     }
     failures = 0;
-    fits.push_back(std::move(best.fit));
-    gains.push_back(best.gain);
-    stays.push_back(0);
-    from_region.push_back(best.from_region);
+    chosen.push_back(Chosen{std::move(best.fit), best.gain, false, best.from_region});
     update_union();
     report("patch accepted");
     // The most promising spares only (a machined surface each).
     for (Fitted& f : pool) f.gain = gain_of(f.fit, covered, area, tol);
     std::stable_sort(pool.begin(), pool.end(), [](const Fitted& x, const Fitted& y) { return x.gain > y.gain; });
     while (!pool.empty() && (int(pool.size()) > o.spares || pool.back().gain < 0.005)) pool.pop_back();
-    if (sharing && fits.size() == 1) {
+    if (sharing && chosen.size() == 1) {
       // The shared tool: the first patch's, turned to stand with its holder end along `up` (with a
       // check surface the part has chosen that end already). Held from now on; the seeds are placed
       // at its radii; the other first-round fits are refitted with it.
-      PatchFit& first = fits.front();
+      PatchFit& first = chosen.front().fit;
       if (o.up && !o.patch.fit.check.part && mean_axis(first.fit.rails).dot(*o.up) < 0) first = reversed(std::move(first));
       o.patch.fit.fixed_tool = first.fit.tool;
       o.tool_length = first.fit.rails.length;
@@ -1140,9 +1135,9 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     }
   }
   if (exchanges > 0) recount_gains();
-  out.from_regions = int(std::count(from_region.begin(), from_region.end(), 1));
+  out.from_regions = int(std::count_if(chosen.begin(), chosen.end(), [](const Chosen& c) { return c.from_region; }));
   out.coverage_held_tool = out.coverage;
-  if (sharing && fits.size() > 1) {
+  if (sharing && chosen.size() > 1) {
     // One joint refit of every patch with one tool (eq. 12 summed over the patches, the radii free
     // again, from the held tool and the fitted motions), kept when the union's coverage does not
     // drop and no patch gouges after trimming.
@@ -1152,12 +1147,12 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     po.trim_gouges = true;
     po.orient_by_part = false;
     std::vector<FitResult> joint;
-    for (const PatchFit& f : fits) joint.push_back(f.fit);
+    for (const Chosen& c : chosen) joint.push_back(c.fit.fit);
     std::vector<PatchFit> refit;
     try {
-      joint = fit_shared_tool(std::vector<const SurfaceIndex*>(fits.size(), &surface), std::move(joint), o.tool_length, po.fit);
-      for (size_t k = 0; k < fits.size(); ++k) {
-        PatchFit f = fits[k];
+      joint = fit_shared_tool(std::vector<const SurfaceIndex*>(chosen.size(), &surface), std::move(joint), o.tool_length, po.fit);
+      for (size_t k = 0; k < chosen.size(); ++k) {
+        PatchFit f = chosen[k].fit;
         f.fit = std::move(joint[k]);
         f.tip_shortened = 0;
         f.holder_lengthened = 0;
@@ -1168,12 +1163,12 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     } catch (const InputError&) {
       refit.clear();  // a motion left the surface: the held tool's patches stay
     }
-    if (refit.size() == fits.size()) {
+    if (refit.size() == chosen.size()) {
       std::vector<const MachinedSurface*> ms;
       for (const PatchFit& f : refit) ms.push_back(&f.machined);
       const UnionDeviation u = union_deviation(ms, nv);
       if (coverage(m, u.deviation, tol) >= out.coverage) {
-        fits = std::move(refit);
+        for (size_t k = 0; k < chosen.size(); ++k) chosen[k].fit = std::move(refit[k]);
         update_union();
         out.joint_refit = true;
         recount_gains();
@@ -1185,29 +1180,29 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   // Machining order: along Φ's longest extent (principal axis of the vertices).
   Eigen::Vector3d axis = extents.col(2);
   if (axis.sum() < 0) axis = -axis;  // deterministic sign
-  std::vector<double> key(fits.size(), 0.0), weight(fits.size(), 0.0);
+  std::vector<double> key(chosen.size(), 0.0), weight(chosen.size(), 0.0);
   for (size_t v = 0; v < nv; ++v)
     if (out.owner[v] >= 0) {
       key[size_t(out.owner[v])] += area[v] * m.vertices[v].dot(axis);
       weight[size_t(out.owner[v])] += area[v];
     }
-  for (size_t p = 0; p < fits.size(); ++p)
-    key[p] = weight[p] > 0 ? key[p] / weight[p] : fits[p].fit.rails.point(0.5, 0.5).dot(axis);
-  std::vector<size_t> order(fits.size());
+  for (size_t p = 0; p < chosen.size(); ++p)
+    key[p] = weight[p] > 0 ? key[p] / weight[p] : chosen[p].fit.fit.rails.point(0.5, 0.5).dot(axis);
+  std::vector<size_t> order(chosen.size());
   std::iota(order.begin(), order.end(), size_t(0));
   std::stable_sort(order.begin(), order.end(), [&](size_t x, size_t y) { return key[x] < key[y]; });
-  std::vector<int> new_index(fits.size());
+  std::vector<int> new_index(chosen.size());
   for (size_t k = 0; k < order.size(); ++k) {
     const size_t p = order[k];
     new_index[p] = int(k);
     DetectedPatch d;
     d.spec.name = "auto-" + std::to_string(k + 1);
     d.spec.init = PatchInit::Lines;
-    d.spec.lines = lines_of(fits[p].fit.rails, o.lines);
+    d.spec.lines = lines_of(chosen[p].fit.fit.rails, o.lines);
     d.spec.rail = 0;
-    d.spec.length = fits[p].fit.rails.length;
-    d.fit = std::move(fits[p]);
-    d.new_area = gains[p];
+    d.spec.length = chosen[p].fit.fit.rails.length;
+    d.fit = std::move(chosen[p].fit);
+    d.new_area = chosen[p].gain;
     out.patches.push_back(std::move(d));
   }
   for (int& w : out.owner)
