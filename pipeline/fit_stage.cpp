@@ -428,6 +428,30 @@ TriMesh offset_mesh(const TriMesh& mesh, double offset, int side) {
   for (size_t v = 0; v < out.vertices.size(); ++v) out.vertices[v] += side * offset * n[v];
   return out;
 }
+
+// passes: every pass but the last with the last pass's tool held, its motion fitted to Φ offset by
+// the pass's allowance towards the tool (started from the last pass's motion).
+void fit_earlier_passes(const Job& job, const FitOptions& fit, FittedJob& out, const Progress& progress) {
+  for (size_t k = 0; k + 1 < job.passes_mm.size(); ++k)
+    for (FittedPatch& fp : out.patches) {
+      PassMotion pm;
+      pm.allowance_mm = job.passes_mm[k];
+      const SurfaceIndex target(
+          pm.allowance_mm > 0 ? offset_mesh(out.unit_surface, out.frame.length_to_unit(pm.allowance_mm), fp.allowance_side)
+                              : out.unit_surface);
+      FitOptions o = fit;
+      o.fixed_tool = fp.fit.fit.tool;
+      o.constraints = {};
+      const FitResult r = optimize_motion(target, fp.fit.fit.rails, o);
+      pm.rails = r.rails;
+      pm.eps_mm = out.frame.length_to_mm(r.eps_opt.max);
+      pm.coverage = coverage(target.mesh(), machined_surface(target, r.rails, r.tool).design_deviation,
+                             out.frame.length_to_unit(job.tolerance_mm));
+      progress(fmt::format("patch {}: pass {} (allowance {} mm): eps {:.4f} mm, coverage {:.1f}%", fp.job->name, k + 1,
+                           pm.allowance_mm, pm.eps_mm, 100 * pm.coverage));
+      fp.earlier_passes.push_back(std::move(pm));
+    }
+}
 }  // namespace
 
 FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
@@ -489,6 +513,11 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   };
   if (job.cover) {
     detect_job(job, index, fit_options(), catalogue ? catalogue->second : 0.0, out, progress);
+    // passes: the detected patches are fitted to Φ itself (the last pass, allowance 0); their tools
+    // stand on the side of their lines.
+    if (job.passes_mm.size() > 1)
+      for (FittedPatch& fp : out.patches) fp.allowance_side = lines_side(index, unit_spec(*fp.job, out.frame));
+    fit_earlier_passes(job, fit_options(), out, progress);
     check_job(job, out, progress);
     return out;
   }
@@ -548,27 +577,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   }
   if (job.tool.shared && !catalogue && out.patches.size() > 1)
     share_tool(job, targets, patch_options, fit_options(), out, progress);
-  // passes: every pass but the last with the last pass's tool held, its motion fitted to Φ offset by
-  // the pass's allowance (started from the last pass's motion).
-  for (size_t k = 0; k + 1 < job.passes_mm.size(); ++k)
-    for (FittedPatch& fp : out.patches) {
-      PassMotion pm;
-      pm.allowance_mm = job.passes_mm[k];
-      const SurfaceIndex target(
-          pm.allowance_mm > 0 ? offset_mesh(out.unit_surface, out.frame.length_to_unit(pm.allowance_mm), fp.allowance_side)
-                              : out.unit_surface);
-      FitOptions o = fit_options();
-      o.fixed_tool = fp.fit.fit.tool;
-      o.constraints = {};
-      const FitResult r = optimize_motion(target, fp.fit.fit.rails, o);
-      pm.rails = r.rails;
-      pm.eps_mm = out.frame.length_to_mm(r.eps_opt.max);
-      pm.coverage = coverage(target.mesh(), machined_surface(target, r.rails, r.tool).design_deviation,
-                             out.frame.length_to_unit(job.tolerance_mm));
-      progress(fmt::format("patch {}: pass {} (allowance {} mm): eps {:.4f} mm, coverage {:.1f}%", fp.job->name, k + 1,
-                           pm.allowance_mm, pm.eps_mm, 100 * pm.coverage));
-      fp.earlier_passes.push_back(std::move(pm));
-    }
+  fit_earlier_passes(job, fit_options(), out, progress);
   check_job(job, out, progress);
   return out;
 }
@@ -948,7 +957,13 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
     y += fmt::format("tool: {{shape: {}, control_points: {}{}}}\n", to_string(o.shape), o.meridian_control_points, extra);
   }
   if (job.allowance_mm > 0) y += "allowance: " + num(job.allowance_mm) + "\n";
+  if (!job.passes_mm.empty()) {
+    std::vector<std::string> passes;
+    for (double a : job.passes_mm) passes.push_back("{allowance: " + num(a) + "}");
+    y += fmt::format("passes: [{}]\n", fmt::join(passes, ", "));
+  }
   if (job.overtravel_mm > 0) y += "overtravel: " + num(job.overtravel_mm) + "\n";
+  if (job.depth_cuts > 1) y += fmt::format("depth_cuts: {}\n", job.depth_cuts);
   y += fmt::format("tolerance: {}\nsampling: {{s: {}, t: {}}}\n", num(job.tolerance_mm), o.samples_s, o.samples_t);
   y += fmt::format("weights: {{plane: {}, fair: {}, point: {}, rigid: {}, anchor: {}}}\n", num(o.w_plane), num(o.w_fair),
                    num(o.w_point), num(o.w_rigid), num(o.w_anchor));

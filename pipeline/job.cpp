@@ -354,12 +354,18 @@ Job read_job(const std::filesystem::path& file) {
     // Detection fits its own motions and tools patch by patch; with `shared: true` one custom tool
     // for all of them (the first patch's held for the others, then refitted jointly). A catalogue
     // tool held from the first candidate on does not find the patches yet (the exact barrel over two
-    // flanks: 55% in 8 patches), and an allowance is for listed patches: detected-job.yaml takes both.
+    // flanks: 55% in 8 patches), and detection fits Φ itself: an allowance is for listed patches
+    // (detected-job.yaml takes both), passes leave stock before a last pass on Φ.
     if (const YAML::Node t = root["tool"]; t && t["catalogue"])
       r.fail(t["catalogue"], "tool.catalogue",
              "not with patches: auto (list the patches, e.g. from detected-job.yaml; or tool: {shared: true} for one custom tool)");
-    for (const char* k : {"allowance", "passes"})
-      if (root[k]) r.fail(root[k], k, "not with patches: auto (list the patches, e.g. from detected-job.yaml)");
+    if (root["allowance"])
+      r.fail(root["allowance"], "allowance",
+             "not with patches: auto (list the patches, e.g. from detected-job.yaml; or passes: [{allowance: 0.3}, {allowance: 0}])");
+    if (!job.passes_mm.empty() && job.passes_mm.back() > 0)
+      r.fail(root["passes"], "passes",
+             "with patches: auto the last pass must have allowance 0 (detection fits the design surface itself; list the "
+             "patches, e.g. from detected-job.yaml, to finish with stock left)");
     CoverJob& c = job.cover.emplace();
     if (const YAML::Node cv = root["cover"]) {
       if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8, exchanges: 3, regions: 2}");

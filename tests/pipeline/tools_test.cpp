@@ -181,14 +181,19 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
     CAPTURE(msg);
     CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
   }
-  for (const char* key : {"allowance: 0.2", "passes: [{allowance: 0.2}, {allowance: 0}]", "tool: {catalogue: cyl-d6-l20}",
-                          "tool: {catalogue: cyl-d6-l20, shared: true}"}) {
+  for (const char* key : {"allowance: 0.2", "tool: {catalogue: cyl-d6-l20}", "tool: {catalogue: cyl-d6-l20, shared: true}"}) {
     CAPTURE(key);
     const std::string msg = tools_error_of(dir, std::string(key) + "\nsurface: s.obj\npatches: auto\n");
     CAPTURE(msg);
     CHECK(msg.find(dir.file("job.yaml") + ":1: ") != std::string::npos);
     CHECK(msg.find("not with patches: auto") != std::string::npos);
   }
+  // Passes with patches: auto end on the design surface (detection fits Φ itself).
+  const std::string stock = tools_error_of(dir, "passes: [{allowance: 0}, {allowance: 0.2}]\nsurface: s.obj\npatches: auto\n");
+  CHECK(stock.find(dir.file("job.yaml") + ":1: passes: with patches: auto the last pass must have allowance 0") !=
+        std::string::npos);
+  test::write_text(dir.file("job.yaml"), "passes: [{allowance: 0.2}, {allowance: 0}]\nsurface: s.obj\npatches: auto\n");
+  CHECK(pipeline::read_job(dir.file("job.yaml")).passes_mm == std::vector<double>{0.2, 0});
   // patches: auto takes one shared custom tool, with the custom tool's limits.
   for (const char* key : {"tool: {shared: true}", "tool: {shared: true, shape: cone, max_diameter: 20}"}) {
     CAPTURE(key);
@@ -423,6 +428,60 @@ TEST_CASE("passes: each pass is its own section of the patch's program, in order
   REQUIRE(r["passes"].size() == 2);
   CHECK(r["passes"][0]["allowance_mm"] == 0.3);
   CHECK(r["passes"][1]["allowance_mm"] == 0);
+}
+
+TEST_CASE("patches: auto with passes: every detected patch gets the earlier pass 0.3 mm off, first in its program" * doctest::test_suite("heavy")) {
+  // The README's main job (the bundled blade, detected patches, cone tools) with a semi-finishing pass.
+  test::ScratchDir dir("auto-passes");
+  const std::string ex = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/";
+  test::write_text(dir.file("job.yaml"), "surface: " + ex + "blade.obj\ntool: {shape: cone}\ntolerance: 0.01\n"
+                                         "passes: [{allowance: 0.3}, {allowance: 0}]\nmachine: xyzac-trt\n"
+                                         "post: {dialects: [linuxcnc]}\npatches: auto\ncover: {coverage: 0.95, max_patches: 4}\n");
+  pipeline::Job j = pipeline::read_job(dir.file("job.yaml"));
+  const Machine machine = pipeline::check_run(j);
+  const pipeline::RunResult run = pipeline::run(std::move(j), machine, {});
+  const pipeline::FittedJob& f = run.fit.fitted;
+  REQUIRE(f.cover);
+  CHECK(f.cover->coverage >= 0.95);
+  REQUIRE(!f.patches.empty());
+  const SurfaceIndex design(f.surface.mesh);
+  for (const pipeline::FittedPatch& p : f.patches) {
+    CAPTURE(p.job->name);
+    REQUIRE(p.earlier_passes.size() == 1);
+    const pipeline::PassMotion& rough = p.earlier_passes[0];
+    CHECK(rough.allowance_mm == 0.3);
+    // The earlier pass stands 0.3 mm farther from Φ than the detected (last) one, pose by pose.
+    const double half = 0.5 * p.assembly.cutter_length();
+    REQUIRE(rough.poses.size() == p.poses.size());
+    double worst = 0;
+    for (size_t i = 0; i < p.poses.size(); ++i) {
+      const double d_final = design.closest(p.poses[i].tip + half * p.poses[i].axis).distance;
+      const double d_rough = design.closest(rough.poses[i].tip + half * rough.poses[i].axis).distance;
+      worst = std::max(worst, std::abs(d_rough - d_final - 0.3));
+    }
+    MESSAGE(p.job->name << ": pass 1 eps " << rough.eps_mm << " mm, coverage of the offset " << rough.coverage
+                        << ", offset error " << worst << " mm");
+    CHECK(worst < 0.01);
+  }
+  // One program per patch, two sections, the 0.3 mm pass first, one tool change.
+  int programs = 0;
+  for (const pipeline::PostedProgram& w : run.programs) {
+    ++programs;
+    CAPTURE(w.patch);
+    REQUIRE(w.posted.sections.size() == 2);
+    const std::string text = nc_text(w.posted.program, {w.dialect, false, 0.005});
+    const size_t rough_at = text.find("ALLOWANCE 0.3"), finish_at = text.find("FLANKCAM FIT OF");
+    REQUIRE(rough_at != std::string::npos);
+    REQUIRE(finish_at != std::string::npos);
+    CHECK(rough_at < finish_at);
+    CHECK(count_m6(text) == 1);
+  }
+  CHECK(programs == int(f.patches.size()));
+  // detected-job.yaml keeps the passes: re-read, it is the same process with the patches listed.
+  test::write_text(dir.file("detected-job.yaml"), pipeline::detected_job_yaml(run.fit.job, f));
+  const pipeline::Job again = pipeline::read_job(dir.file("detected-job.yaml"));
+  CHECK(again.passes_mm == std::vector<double>{0.3, 0});
+  CHECK(again.patches.size() == f.patches.size());
 }
 
 TEST_CASE("patches: auto with tool: {shared: true}: one tool for every detected patch, said in report.json" * doctest::test_suite("heavy")) {
