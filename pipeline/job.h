@@ -13,6 +13,7 @@
 #include "core/patch.h"
 #include "core/tool_end.h"
 #include "pipeline/tool_catalogue.h"
+#include "postproc/nc_program.h"
 
 namespace flankcam::pipeline {
 
@@ -102,17 +103,19 @@ struct Job {
   PostJob post;
 };
 
-// Throws InputError "FILE:LINE: KEY: what is wrong" for unknown keys, wrong types, bad values,
-// missing files.
 // How the cut is judged with a separate part, in the fit's trim, the collision check and the
 // back-simulation alike: the part without Φ's coarser twin by `part_mm` (check_tolerance), Φ itself by
 // `design_mm` (the fitted tolerance), and a cutter hit on that part within `design_within_mm` of Φ
 // (the twin's sag plus the tolerance: where the part's coarse faces meet the twin's hole) left to Φ.
 struct CutJudgement {
   double part_mm = 0, design_mm = 0, design_within_mm = 0;
+  // As the post's and the back-simulation's options take it, with that part (not owned).
+  [[nodiscard]] CutApart apart(const SurfaceIndex* cut_part) const { return {cut_part, design_mm, design_within_mm}; }
 };
 [[nodiscard]] CutJudgement cut_judgement(const Job& job, double twin_sag_mm);
 
+// Throws InputError "FILE:LINE: KEY: what is wrong" for unknown keys, wrong types, bad values,
+// missing files.
 [[nodiscard]] Job read_job(const std::filesystem::path& file);
 
 }  // namespace flankcam::pipeline

@@ -354,12 +354,10 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
   if (r.fit.fitted.check_part) {
     cut_part.emplace(to_work(j.post, *r.fit.fitted.check_part));
     design_work.emplace(to_work(j.post, r.fit.fitted.surface.mesh));
-    settings.options.cut_part = &*cut_part;
     settings.options.design = &*design_work;
     const CutJudgement c = cut_judgement(j, r.fit.fitted.check_twin_sag_mm);
     settings.options.gouge_tolerance_mm = c.part_mm;
-    settings.options.design_gouge_tolerance_mm = c.design_mm;
-    settings.options.design_within_mm = c.design_within_mm;
+    settings.options.apart = c.apart(&*cut_part);
   }
   // A cut whose end has no clear lead (a tool standing deep in a passage where the motion was trimmed
   // for the part) is shortened to the outermost poses that can be entered and left, every section of

@@ -149,11 +149,9 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
   if (separate) {
     const CheckPart cp = check_part(separate->mesh(), run.design, j.tolerance_mm);
     cut.emplace(cp.mesh);
-    judge.cut_part = &*cut;
     const CutJudgement c = cut_judgement(j, cp.twin_sag);
-    judge.design_within_mm = c.design_within_mm;
     judge.gouge_tolerance_mm = c.part_mm;
-    judge.design_gouge_tolerance_mm = c.design_mm;
+    judge.apart = c.apart(&*cut);
   }
 
   for (const std::string& file : request.programs) {

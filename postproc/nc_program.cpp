@@ -73,9 +73,9 @@ std::string PostOptions::validate() const {
   if (!(clearance_mm > 0) || !std::isfinite(clearance_mm)) return "clearance_mm: must be > 0";
   if (!(lead_mm > 0) || !std::isfinite(lead_mm)) return "lead_mm: must be > 0";
   if (!(gouge_tolerance_mm > 0) || !std::isfinite(gouge_tolerance_mm)) return "gouge_tolerance_mm: must be > 0";
-  if (!(design_gouge_tolerance_mm > 0) || !std::isfinite(design_gouge_tolerance_mm))
+  if (!(apart.design_gouge_tolerance_mm > 0) || !std::isfinite(apart.design_gouge_tolerance_mm))
     return "design_gouge_tolerance_mm: must be > 0";
-  if (!cut_part != !design) return "cut_part and design: give both or neither";
+  if (!apart.cut_part != !design) return "cut_part and design: give both or neither";
   return {};
 }
 
@@ -138,15 +138,14 @@ VerifyOptions back_simulation_options(const PostOptions& o) {
   // Rapids keep the clearance the links were planned with (not merely off the part: the links of a
   // 0.5 mm clearance job came 0.483 mm close); one that does not is planned again farther out.
   vo.link_clearance_mm = o.clearance_mm;
-  if (o.cut_part && o.design)
-    vo.cut_part = o.cut_part, vo.design_gouge_tolerance_mm = o.design_gouge_tolerance_mm, vo.design_within_mm = o.design_within_mm;
+  if (o.apart.cut_part && o.design) vo.apart = o.apart;
   return vo;
 }
 
 // The back-simulation as the link planner asks it about one section's leads.
 struct LinkJudge {
   const SurfaceIndex& part;
-  const SurfaceIndex* design;  // Φ when the cut is judged apart (VerifyOptions::cut_part), else null
+  const SurfaceIndex* design;  // Φ when the cut is judged apart (CutApart), else null
   VerifyTool tool;
   VerifyOptions options;
   Eigen::Vector3d centre;      // of the part's bounding box
@@ -282,7 +281,7 @@ LeadPlanner lead_planner(int tool_number, const SurfaceIndex& part, const ToolAs
   }
   Eigen::AlignedBox3d box;
   for (const Eigen::Vector3d& v : part.mesh().vertices) box.extend(v);
-  const bool apart = configured.cut_part && configured.design;
+  const bool apart = configured.apart.cut_part && configured.design;
   VerifyTool tool;
   tool.number = tool_number, tool.assembly = a;
   return {LinkJudge{part, apart ? configured.design : nullptr, std::move(tool), back_simulation_options(configured),
@@ -439,7 +438,7 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
     for (const PostInput& in : inputs)
       if (std::none_of(tools.begin(), tools.end(), [&](const VerifyTool& t) { return t.number == in.cl.tool; }))
         tools.push_back({in.cl.tool, assembly_of(in), in.tool_length_mm > 0 ? in.tool_length_mm : o.path.tool_length_mm});
-    const bool apart = o.cut_part && o.design;
+    const bool apart = o.apart.cut_part && o.design;
     const VerifyReport rep = verify_text(text, o.dialect, name + file_extension(o.dialect), m, *o.part, tools,
                                          back_simulation_options(o), apart ? o.design : nullptr);
     const bool links_clear = std::none_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.rapid; });

@@ -78,6 +78,19 @@ struct NcProgram {
   std::vector<NcBlock> blocks;
 };
 
+// The cut judged apart (a separate part given, and the design surface Φ): feed blocks are swept
+// against `cut_part`, the part without its coarser twin of Φ (core/check_surface.h), with the gouge
+// tolerance (the check tolerance), and against Φ itself with design_gouge_tolerance_mm (the fit's
+// tolerance), not against the whole part, whose twin would show the fitted cut as a gouge; a cutter
+// hit on `cut_part` within design_within_mm of Φ (the twin's sag plus the tolerance: the cut part's
+// coarse edges along the hole the twin left) is Φ's, left to Φ's own judgement. Rapids still meet
+// the whole part. Not owned; the same frame as the part. No cut_part: the whole part judges the cut.
+struct CutApart {
+  const SurfaceIndex* cut_part = nullptr;
+  double design_gouge_tolerance_mm = 0.01;
+  double design_within_mm = 0;
+};
+
 struct PostOptions {
   Dialect dialect = Dialect::Iso;
   bool line_numbers = false;         // N words (Heidenhain always numbers its blocks)
@@ -94,13 +107,10 @@ struct PostOptions {
   double lead_mm = 2;                // approach / retract off the surface along its normal (at least the
                                      // cutter's radius variation + clearance, so an axial move cannot cut)
   double gouge_tolerance_mm = 0.01;  // back-simulation: the cutter may be this deep in the part in the cut
-  // With a separate part: the cut judged apart (VerifyOptions::cut_part): the part without Φ's twin
-  // (gouge_tolerance_mm) and Φ itself (design_gouge_tolerance_mm), both in the work frame, not owned.
-  // Links are still planned and checked against `part`.
-  const SurfaceIndex* cut_part = nullptr;
+  // With a separate part: the cut judged apart (CutApart; `gouge_tolerance_mm` for its cut_part) and
+  // Φ itself, `design`, both in the work frame, not owned. Links are still planned and checked against `part`.
+  CutApart apart;
   const SurfaceIndex* design = nullptr;
-  double design_gouge_tolerance_mm = 0.01;
-  double design_within_mm = 0;       // VerifyOptions::design_within_mm
   std::string validate() const;      // empty when valid
 };
 

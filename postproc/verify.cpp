@@ -22,7 +22,7 @@ std::string VerifyOptions::validate() const {
   if (!(report_clearance_mm > 0) || !std::isfinite(report_clearance_mm)) return "report_clearance_mm: must be > 0";
   if (!(cl_tolerance_mm > 0) || !std::isfinite(cl_tolerance_mm)) return "cl_tolerance_mm: must be > 0";
   if (!(cl_angle_tolerance_deg > 0) || !std::isfinite(cl_angle_tolerance_deg)) return "cl_angle_tolerance_deg: must be > 0";
-  if (cut_part && (!(design_gouge_tolerance_mm >= 0) || !std::isfinite(design_gouge_tolerance_mm)))
+  if (apart.cut_part && (!(apart.design_gouge_tolerance_mm >= 0) || !std::isfinite(apart.design_gouge_tolerance_mm)))
     return "design_gouge_tolerance_mm: must be >= 0 when the cut is judged apart";
   return {};
 }
@@ -189,10 +189,10 @@ void sweep(const SurfaceIndex& part, const SurfaceIndex* design, const std::vect
     std::vector<double> slack;
   };
   std::vector<Judge> judges{{&part, o.gouge_tolerance_mm, {}, {}}};
-  const bool apart = o.cut_part && design;
+  const bool apart = o.apart.cut_part && design;
   if (apart) {
-    judges.push_back({o.cut_part, o.gouge_tolerance_mm, {}, {}});
-    judges.push_back({design, o.design_gouge_tolerance_mm, {}, {}});
+    judges.push_back({o.apart.cut_part, o.gouge_tolerance_mm, {}, {}});
+    judges.push_back({design, o.apart.design_gouge_tolerance_mm, {}, {}});
   }
   const VerifyTool* current = nullptr;
   std::vector<AxialSample> samples;
@@ -230,7 +230,7 @@ void sweep(const SurfaceIndex& part, const SurfaceIndex* design, const std::vect
           mc = std::min(mc, g);
           bool hit = sb.rapid ? g < o.link_clearance_mm : (comp == Component::Tool ? -g > j.gouge_tolerance_mm : g < 0);
           // judge 1, the part without Φ's twin: its coarse edges along the twin's hole are Φ's
-          if (hit && jj == 1 && comp == Component::Tool && left_to_design(*design, f.point, o.design_within_mm)) hit = false;
+          if (hit && jj == 1 && comp == Component::Tool && left_to_design(*design, f.point, o.apart.design_within_mm)) hit = false;
           if (hit && -g > worst[size_t(comp)].depth_mm) {
             VerifyHit& h = worst[size_t(comp)];
             h.block = sb.block, h.line = sb.line, h.rapid = sb.rapid, h.component = comp;
@@ -596,7 +596,7 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
   sweep(part, design, blocks, o, rep);
   if (!cl.empty()) compare_with_cl(blocks, cl, part, o, rep);
   rep.motion = motion_of(blocks);
-  if (design) rep.design = design_deviation(*design, blocks, o.cut_part ? o.design_gouge_tolerance_mm : o.gouge_tolerance_mm);
+  if (design) rep.design = design_deviation(*design, blocks, o.apart.cut_part ? o.apart.design_gouge_tolerance_mm : o.gouge_tolerance_mm);
   return rep;
 }
 
@@ -625,7 +625,7 @@ VerifyReport verify_cl(const ClProgram& cl, const SurfaceIndex& part, const Veri
   }
   sweep(part, design, blocks, o, rep);
   rep.motion = motion_of(blocks);
-  if (design) rep.design = design_deviation(*design, blocks, o.cut_part ? o.design_gouge_tolerance_mm : o.gouge_tolerance_mm);
+  if (design) rep.design = design_deviation(*design, blocks, o.apart.cut_part ? o.apart.design_gouge_tolerance_mm : o.gouge_tolerance_mm);
   return rep;
 }
 

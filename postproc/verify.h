@@ -19,6 +19,7 @@
 #include "kinematics/machine.h"
 #include "postproc/apt.h"
 #include "postproc/gcode.h"
+#include "postproc/nc_program.h"
 
 namespace flankcam {
 
@@ -39,16 +40,9 @@ struct VerifyOptions {
   // plus what writing 4 decimals and sampling between the linearisation's checks may add.
   double cl_tolerance_mm = 0.005 + 0.002;
   double cl_angle_tolerance_deg = 0.05 + 0.01;
-  // The cut judged apart (a separate part given, and the design surface): the feed blocks are swept
-  // against `cut_part`, the part without its coarser twin of Φ (core/check_surface.h), with
-  // gouge_tolerance_mm (the check tolerance), and against Φ itself with design_gouge_tolerance_mm
-  // (the fit's tolerance), not against the whole part, whose twin would show the fitted cut as a
-  // gouge. Rapids still meet the whole part. Not owned; the same frame as the part.
-  const SurfaceIndex* cut_part = nullptr;
-  double design_gouge_tolerance_mm = -1;
-  // A cutter hit on `cut_part` within this of Φ is Φ's (the twin's sag plus the tolerance: the cut
-  // part's coarse edges along the hole the twin left), left to Φ's own judgement.
-  double design_within_mm = 0;
+  // The cut judged apart (CutApart, with gouge_tolerance_mm for its cut_part) when the design
+  // surface is given too.
+  CutApart apart;
   std::string validate() const;
 };
 

@@ -462,8 +462,8 @@ TEST_CASE("a part whose coarse twin of the flank stands 0.03 mm proud: judged ap
     for (const VerifyHit& h : plain.hits) deepest = std::max(deepest, h.depth_mm);
     CHECK(deepest == doctest::Approx(hub > 0 ? 0.05 : 0.03).epsilon(0.1));
     // Judged apart: the flank against the design surface (within 0.01), the rest against the floor.
-    o.cut_part = &rest;
-    o.design_gouge_tolerance_mm = 0.01;
+    o.apart.cut_part = &rest;
+    o.apart.design_gouge_tolerance_mm = 0.01;
     const VerifyReport apart = verify_text(p.text, c.dialect, "wall", c.machine, whole, p.tools, o, &design);
     if (hub < 0) {
       CHECK(apart.clean());
@@ -488,8 +488,8 @@ TEST_CASE("a part whose coarse twin of the flank stands 0.03 mm proud: judged ap
   VerifyOptions o;
   o.gouge_tolerance_mm = 0.01;
   const SurfaceIndex rest(floor(-1));
-  o.cut_part = &rest;
-  o.design_gouge_tolerance_mm = 0.01;
+  o.apart.cut_part = &rest;
+  o.apart.design_gouge_tolerance_mm = 0.01;
   const VerifyReport into = verify_text(p.text, c.dialect, "wall", c.machine, sunk, p.tools, o, &sunk);
   REQUIRE_FALSE(into.clean());
   for (const VerifyHit& h : into.hits) CHECK(h.depth_mm == doctest::Approx(0.03).epsilon(0.1));
