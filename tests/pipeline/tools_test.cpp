@@ -66,6 +66,32 @@ std::string tools_error_of(const test::ScratchDir& dir, const std::string& yaml)
   test::write_text(dir.file("job.yaml"), yaml);
   return test::job_error(dir.file("job.yaml"));
 }
+// How far (mm) a patch's earlier pass is, at worst, from standing `allowance` farther from Φ than
+// its last pass, pose by pose (the cutter's middle against Φ; the same tool).
+double pass_offset_error(const SurfaceIndex& design, const pipeline::FittedPatch& p, const pipeline::PassMotion& rough,
+                         double allowance) {
+  const double half = 0.5 * p.assembly.cutter_length();
+  REQUIRE(rough.poses.size() == p.poses.size());
+  double worst = 0;
+  for (size_t i = 0; i < p.poses.size(); ++i) {
+    const double d_final = design.closest(p.poses[i].tip + half * p.poses[i].axis).distance;
+    const double d_rough = design.closest(rough.poses[i].tip + half * rough.poses[i].axis).distance;
+    worst = std::max(worst, std::abs(d_rough - d_final - allowance));
+  }
+  return worst;
+}
+// A two-pass program: two sections, the 0.3 mm pass's first, one tool change.
+void check_two_pass_program(const pipeline::PostedProgram& w) {
+  CAPTURE(w.patch);
+  REQUIRE(w.posted.sections.size() == 2);
+  CHECK(w.posted.sections[0].first_block < w.posted.sections[1].first_block);
+  const std::string text = nc_text(w.posted.program, {w.dialect, false, 0.005});
+  const size_t rough_at = text.find("ALLOWANCE 0.3"), finish_at = text.find("FLANKCAM FIT OF");
+  REQUIRE(rough_at != std::string::npos);
+  REQUIRE(finish_at != std::string::npos);
+  CHECK(rough_at < finish_at);
+  CHECK(count_m6(text) == 1);
+}
 }  // namespace
 
 TEST_CASE("the holder's body for the fit: both sides of the step over a narrower shank, piece ends exact") {
@@ -397,14 +423,7 @@ TEST_CASE("passes: each pass is its own section of the patch's program, in order
   const pipeline::PassMotion& rough = p.earlier_passes[0];
   // The earlier pass stands 0.3 mm farther from the design surface, pose by pose (same tool).
   const SurfaceIndex design(run.fit.fitted.surface.mesh);
-  const double half = 0.5 * p.assembly.cutter_length();
-  REQUIRE(rough.poses.size() == p.poses.size());
-  double worst = 0;
-  for (size_t i = 0; i < p.poses.size(); ++i) {
-    const double d_final = design.closest(p.poses[i].tip + half * p.poses[i].axis).distance;
-    const double d_rough = design.closest(rough.poses[i].tip + half * rough.poses[i].axis).distance;
-    worst = std::max(worst, std::abs(d_rough - d_final - 0.3));
-  }
+  const double worst = pass_offset_error(design, p, rough, 0.3);
   MESSAGE("pass 1 (allowance 0.3): eps " << rough.eps_mm << " mm, coverage " << rough.coverage << "; final pass eps "
                                          << run.fit.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max) << " mm; offset error "
                                          << worst << " mm");
@@ -414,14 +433,7 @@ TEST_CASE("passes: each pass is its own section of the patch's program, in order
   for (const pipeline::PostedProgram& w : run.programs) {
     if (w.patch != "two-pass") continue;
     ++programs;
-    REQUIRE(w.posted.sections.size() == 2);
-    CHECK(w.posted.sections[0].first_block < w.posted.sections[1].first_block);
-    const std::string text = nc_text(w.posted.program, {w.dialect, false, 0.005});
-    const size_t rough_at = text.find("ALLOWANCE 0.3"), finish_at = text.find("FLANKCAM FIT OF");
-    REQUIRE(rough_at != std::string::npos);
-    REQUIRE(finish_at != std::string::npos);
-    CHECK(rough_at < finish_at);
-    CHECK(count_m6(text) == 1);
+    check_two_pass_program(w);
   }
   CHECK(programs == 1);
   const nlohmann::ordered_json r = pipeline::patch_report(run.fit.job, run.fit.fitted, p);
@@ -451,14 +463,7 @@ TEST_CASE("patches: auto with passes: every detected patch gets the earlier pass
     const pipeline::PassMotion& rough = p.earlier_passes[0];
     CHECK(rough.allowance_mm == 0.3);
     // The earlier pass stands 0.3 mm farther from Φ than the detected (last) one, pose by pose.
-    const double half = 0.5 * p.assembly.cutter_length();
-    REQUIRE(rough.poses.size() == p.poses.size());
-    double worst = 0;
-    for (size_t i = 0; i < p.poses.size(); ++i) {
-      const double d_final = design.closest(p.poses[i].tip + half * p.poses[i].axis).distance;
-      const double d_rough = design.closest(rough.poses[i].tip + half * rough.poses[i].axis).distance;
-      worst = std::max(worst, std::abs(d_rough - d_final - 0.3));
-    }
+    const double worst = pass_offset_error(design, p, rough, 0.3);
     MESSAGE(p.job->name << ": pass 1 eps " << rough.eps_mm << " mm, coverage of the offset " << rough.coverage
                         << ", offset error " << worst << " mm");
     CHECK(worst < 0.01);
@@ -467,14 +472,7 @@ TEST_CASE("patches: auto with passes: every detected patch gets the earlier pass
   int programs = 0;
   for (const pipeline::PostedProgram& w : run.programs) {
     ++programs;
-    CAPTURE(w.patch);
-    REQUIRE(w.posted.sections.size() == 2);
-    const std::string text = nc_text(w.posted.program, {w.dialect, false, 0.005});
-    const size_t rough_at = text.find("ALLOWANCE 0.3"), finish_at = text.find("FLANKCAM FIT OF");
-    REQUIRE(rough_at != std::string::npos);
-    REQUIRE(finish_at != std::string::npos);
-    CHECK(rough_at < finish_at);
-    CHECK(count_m6(text) == 1);
+    check_two_pass_program(w);
   }
   CHECK(programs == int(f.patches.size()));
   // detected-job.yaml keeps the passes: re-read, it is the same process with the patches listed.
