@@ -763,6 +763,59 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   return out;
 }
 
+// A patch's motion continued past an end whose last row of Ω still lies over Φ. Propagation stops a
+// motion where its line reaches Φ's boundary; a contact curve slanted to that boundary reaches it at
+// one end of the tool first and leaves a wedge of the boundary strip unmachined (rotor 37's trailing
+// edge: 2-10 of 241 columns along the hub half, fitted within 0.003 mm up to where the motion ends).
+// The motion is continued straight by steps of 5% of its length, at most 20% an end, and fitted
+// again with its tool held (what of the line still lies over Φ holds it there), each judged as a
+// candidate (trimmed where it gouges Φ or meets the part), and kept while it brings more of what is
+// uncovered. The kept stretch's t_from / t_to then lie beyond [0, 1] of the first optimised motion.
+Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>& covered, const std::vector<double>& area,
+                 const CoverOptions& o) {
+  PatchOptions po = candidate_options(o);
+  po.solid_cutter_on_phi = true;
+  FitOptions held = po.fit;
+  held.fixed_tool = f.fit.fit.tool;
+  const auto over_phi = [](const MachinedSurface& ms, int row) {
+    for (int j = 0; j < ms.omega.n_s; ++j)
+      if (std::isfinite(ms.omega_deviation[size_t(row) * size_t(ms.omega.n_s) + size_t(j)])) return true;
+    return false;
+  };
+  const PatchFit original = f.fit;
+  const double t_from = original.t_from, w = original.t_to - original.t_from;
+  // Not an end trimmed already (where the motion gouged Φ or met the part).
+  bool ends[2] = {original.t_from == 0 && over_phi(original.machined, 0),
+                  original.t_to == 1 && over_phi(original.machined, original.machined.omega.n_t - 1)};
+  double before = 0, after = 0;
+  for (int step = 0; step < 4 && (ends[0] || ends[1]); ++step) {
+    const double b = before + (ends[0] ? 0.05 : 0), a = after + (ends[1] ? 0.05 : 0);
+    PatchFit p = original;
+    try {
+      p.fit = optimize_motion(surface, continued(original.fit.rails, b, a), held);
+      p.fit.eps_ini = original.fit.eps_ini;
+      p.fit.iterations += original.fit.iterations;
+      p = machine_and_trim(surface, std::move(p), po);
+    } catch (const InputError&) {
+      break;  // the continued motion left Φ
+    }
+    if (!machinable(p)) break;
+    const double g = gain_of(p, covered, area, po.tolerance);
+    if (!(g > f.gain + 1e-4)) break;
+    // The kept stretch in the first motion's t; an end trimmed back (a gouge or the part) or beyond
+    // Φ is not continued further.
+    const double u0 = -b + (1 + a + b) * p.t_from, u1 = -b + (1 + a + b) * p.t_to;
+    ends[0] = ends[0] && p.t_from == 0 && over_phi(p.machined, 0);
+    ends[1] = ends[1] && p.t_to == 1 && over_phi(p.machined, p.machined.omega.n_t - 1);
+    p.t_from = t_from + w * u0;
+    p.t_to = t_from + w * u1;
+    f.fit = std::move(p);
+    f.gain = g;
+    before = b, after = a;
+  }
+  return f;
+}
+
 // The principal axes of Φ's vertices, by increasing extent (columns).
 Eigen::Matrix3d extent_axes(const TriMesh& m) {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
@@ -1089,6 +1142,10 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         offer(std::move(as_is));
         offer(std::move(refit));
       }
+    }
+    if (best.ok) {
+      report("continuing the best patch's motion past its ends");
+      best = continued(surface, std::move(best), covered, area, o);
     }
     // An exchange round whose best brings no more than the patch set aside (and does not reach the
     // target): that one returns to its place and stays; the next round sets aside the next weakest.

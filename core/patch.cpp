@@ -391,25 +391,26 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
   out.t_to = 1;
   const bool check = o.fit.check.part != nullptr;
   const int rows = out.machined.omega.n_t;
-  // With a part (a job that is collision-checked and posted) the trims keep kTrimMargin of the
-  // tolerances in hand; without one they trim at Φ's tolerance.
-  const double phi_keep = check ? (1 - kTrimMargin) * o.tolerance : o.tolerance;
+  // With a part (a job that is collision-checked and posted) or the solid cutter judged against Φ the
+  // trims keep kTrimMargin of the tolerances in hand; otherwise they trim at Φ's tolerance.
+  const bool solid = o.trim_gouges && (check || o.solid_cutter_on_phi);
+  const double phi_keep = solid ? (1 - kTrimMargin) * o.tolerance : o.tolerance;
   const double part_keep = (1 - kTrimMargin) * o.fit.check.tolerance;
   // The last evaluation of the motion (keep()), and whether the motion has changed since: the final
   // judgement at the full tolerances is derived from it (a hit deeper than a tolerance is deeper than
   // the trim's threshold too), or it is evaluated anew.
-  CutterHits phi_hits;  // with a part and trim_gouges: the cutter against Φ as the collision check sees it
+  CutterHits phi_hits;  // `solid`: the cutter against Φ as the collision check sees it
   PartCheck part;
   CheckProfile profile;  // part's intrusion at the trim's threshold
   bool current = false;
-  // The rows to keep: not gouging Φ (trim_gouges: Ω's samples against Φ and, with a part, the cutter
+  // The rows to keep: not gouging Φ (trim_gouges: Ω's samples against Φ and, `solid`, the cutter
   // against Φ as the collision check judges it, whose solid cutter with flat ends sees what Ω's side
   // envelope does not, its rims at Φ's edges) and clear of the check surface (with a part).
   const auto keep = [&] {
     std::vector<char> ok(size_t(rows), 1);
     if (o.trim_gouges) {
       ok = ungouged_rows(out.machined, phi_keep);
-      if (check) {
+      if (solid) {
         phi_hits =
             cutter_hits(surface, out.fit.rails, out.fit.tool, rows, o.fit.samples_t, phi_keep, o.tolerance, hit_step(o), nullptr, 0);
         for (size_t i = 0; i < ok.size(); ++i) ok[i] = ok[i] && !std::isfinite(phi_hits.depth[i]);
@@ -455,8 +456,8 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
   }
   const auto [t0, t1] = ungouged_range(out.machined, o.tolerance);
   out.gouges = !(t0 == 0.0 && t1 == 1.0);
-  if (check && !current) (void)keep();
-  if (o.trim_gouges && check && !out.gouges)
+  if ((check || solid) && !current) (void)keep();
+  if (solid && !out.gouges)
     out.gouges = std::any_of(phi_hits.depth.begin(), phi_hits.depth.end(), [&](double d) { return d > o.tolerance; });
   if (check) {
     const CheckProfile final_profile = intrusion(part, o.fit.check.tolerance);
@@ -478,6 +479,26 @@ Rails trimmed(const Rails& r, double t0, double t1) {
     const double t = t0 + (t1 - t0) * ts[size_t(i)];
     A.row(i) = r.a.point(t).transpose();
     B.row(i) = r.b.point(t).transpose();
+  }
+  return {fit_bspline(A, ts, r.a.size()), fit_bspline(B, ts, r.b.size()), r.length};
+}
+
+Rails continued(const Rails& r, double before, double after) {
+  // Each rail beyond an end along its chord over the last `step` of t (a least-squares spline's end
+  // derivatives swing; its end span's cubic continued leaves the motion within a tenth of its length).
+  constexpr double step = 0.05;
+  const auto along = [&](const BSpline& c, double t) -> Eigen::Vector3d {
+    if (t < 0) return c.point(0) + t * (c.point(step) - c.point(0)) / step;
+    if (t > 1) return c.point(1) + (t - 1) * (c.point(1) - c.point(1 - step)) / step;
+    return c.point(t);
+  };
+  const int samples = std::max(8 * r.a.size(), 200);
+  Eigen::MatrixXd A(samples, 3), B(samples, 3);
+  const std::vector<double> ts = uniform_parameters(samples);
+  for (int i = 0; i < samples; ++i) {
+    const double t = -before + (1 + before + after) * ts[size_t(i)];
+    A.row(i) = along(r.a, t).transpose();
+    B.row(i) = along(r.b, t).transpose();
   }
   return {fit_bspline(A, ts, r.a.size()), fit_bspline(B, ts, r.b.size()), r.length};
 }

@@ -35,6 +35,10 @@ struct PatchOptions {
   // by more than `tolerance`): an overcut cannot be repaired, an undercut can by a neighbour.
   // Detection always trims; off by default here so hand-placed jobs keep their motion.
   bool trim_gouges = false;
+  // With trim_gouges and no check surface: also the solid cutter against Φ as the collision check
+  // judges it (with a check surface always), with the same margin. Detection's continued motions
+  // pass Φ's boundary, where a flat end's rim can dip into Φ though Ω's side keeps off it.
+  bool solid_cutter_on_phi = false;
   // With a check surface (fit.check) the motion is always trimmed to the longest stretch where the
   // tool keeps out of the part (cutter within fit.check.tolerance, body outside the clearance).
   // With a check surface: the holder end is chosen by the part (holder_up, fit.check.up the
@@ -108,6 +112,10 @@ struct ToolCut {
 
 // The rails restricted to [t0, t1], reparametrised to [0, 1] (same control point count).
 [[nodiscard]] Rails trimmed(const Rails& rails, double t0, double t1);
+
+// The rails over [-before, 1 + after], reparametrised to [0, 1] (same control point count): each rail
+// continued straight past its ends, as the start of a motion fitted further (detection).
+[[nodiscard]] Rails continued(const Rails& rails, double before, double after);
 
 // The same swept tool with its ends exchanged: rails a <-> b and d(s) -> d(1 - s) (the clamped
 // uniform knots are symmetric, so reversing the radius coefficients reverses d for every shape).

@@ -265,6 +265,10 @@ void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, con
                          "than the tolerance",
                          name, fp.fit.t_from, fp.fit.t_to));
   }
+  if (fp.fit.t_from < 0 || fp.fit.t_to > 1)
+    progress(fmt::format("patch {}: motion continued past the end of its fit to t {:.3f}-{:.3f}: its contact line still "
+                         "lay over the design surface there",
+                         name, fp.fit.t_from, fp.fit.t_to));
 }
 
 // tool: {shared: true}: one custom tool for every patch, fitted jointly to all of them (eq. 12
@@ -442,7 +446,19 @@ void fit_earlier_passes(const Job& job, const FitOptions& fit, FittedJob& out, c
       FitOptions o = fit;
       o.fixed_tool = fp.fit.fit.tool;
       o.constraints = {};
-      const FitResult r = optimize_motion(target, fp.fit.fit.rails, o);
+      // A motion continued past the end of its fit (detection; t_from < 0 or t_to > 1) runs beyond Φ
+      // there, where the offset has no samples to move the pass: as the last pass was, the pass is
+      // fitted over the stretch of the first fit (its rails' [τ0, τ1]), continued straight as far and
+      // fitted again.
+      const double w = fp.fit.t_to - fp.fit.t_from;
+      const double tau0 = std::max(0.0, -fp.fit.t_from) / w, tau1 = 1 - std::max(0.0, fp.fit.t_to - 1) / w;
+      FitResult r;
+      if (tau0 > 0 || tau1 < 1) {
+        const FitResult inner = optimize_motion(target, trimmed(fp.fit.fit.rails, tau0, tau1), o);
+        r = optimize_motion(target, continued(inner.rails, tau0 / (tau1 - tau0), (1 - tau1) / (tau1 - tau0)), o);
+      } else {
+        r = optimize_motion(target, fp.fit.fit.rails, o);
+      }
       pm.rails = r.rails;
       pm.eps_mm = out.frame.length_to_mm(r.eps_opt.max);
       pm.coverage = coverage(target.mesh(), machined_surface(target, r.rails, r.tool).design_deviation,
@@ -705,7 +721,7 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
                                 {"twin_triangles_left_to_the_surface", f.check_twin_faces},
                                 {"check_tolerance_mm", job.check_tolerance_mm.value_or(job.tolerance_mm)},
                                 {"clearance_mm", job.clearance_mm},
-                                {"kept_t", {p.fit.t_from, p.fit.t_to}},
+                                {"kept_t", {p.fit.t_from, p.fit.t_to}},  // beyond [0, 1]: continued past the fit's end
                                 {"worst_intrusion_mm", round_mm(fr.length_to_mm(p.fit.check_intrusion))},
                                 {"tip_shortened_mm", round_mm(fr.length_to_mm(p.fit.tip_shortened))},
                                 {"holder_end_lengthened_mm", round_mm(fr.length_to_mm(p.fit.holder_lengthened))},
