@@ -775,6 +775,8 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
                  const CoverOptions& o) {
   PatchOptions po = candidate_options(o);
   po.solid_cutter_on_phi = true;
+  // The holder at the b end: with_check has turned the fit so that its tip is the a end.
+  if (po.fit.check.part) po.fit.check.up = mean_axis(f.fit.fit.rails);
   FitOptions held = po.fit;
   held.fixed_tool = f.fit.fit.tool;
   const auto over_phi = [](const MachinedSurface& ms, int row) {
@@ -787,9 +789,10 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
   // Not an end trimmed already (where the motion gouged Φ or met the part).
   bool ends[2] = {original.t_from == 0 && over_phi(original.machined, 0),
                   original.t_to == 1 && over_phi(original.machined, original.machined.omega.n_t - 1)};
-  double before = 0, after = 0;
+  int before = 0, after = 0;  // steps of 5% the kept motion reaches past each end
   for (int step = 0; step < 4 && (ends[0] || ends[1]); ++step) {
-    const double b = before + (ends[0] ? 0.05 : 0), a = after + (ends[1] ? 0.05 : 0);
+    const int kb = before + (ends[0] ? 1 : 0), ka = after + (ends[1] ? 1 : 0);
+    const double b = 0.05 * kb, a = 0.05 * ka;
     PatchFit p = original;
     try {
       p.fit = optimize_motion(surface, continued(original.fit.rails, b, a), held);
@@ -804,14 +807,15 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
     if (!(g > f.gain + 1e-4)) break;
     // The kept stretch in the first motion's t; an end trimmed back (a gouge or the part) or beyond
     // Φ is not continued further.
-    const double u0 = -b + (1 + a + b) * p.t_from, u1 = -b + (1 + a + b) * p.t_to;
+    const double u0 = p.t_from == 0 ? -b : -b + (1 + a + b) * p.t_from;  // exact at an end kept whole
+    const double u1 = p.t_to == 1 ? 1 + a : -b + (1 + a + b) * p.t_to;
     ends[0] = ends[0] && p.t_from == 0 && over_phi(p.machined, 0);
     ends[1] = ends[1] && p.t_to == 1 && over_phi(p.machined, p.machined.omega.n_t - 1);
     p.t_from = t_from + w * u0;
     p.t_to = t_from + w * u1;
     f.fit = std::move(p);
     f.gain = g;
-    before = b, after = a;
+    before = kb, after = ka;
   }
   return f;
 }
@@ -1096,6 +1100,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       so.exchanges = 0;
       so.spares = 0;
       so.regions = 0;
+      so.continue_ends = false;
       int searched = 0;
       for (const Region& uncovered : uncovered_regions(ring, covered, area)) {
         // Named, not a structured binding: lambdas may not capture those before C++20 (clang refuses).
@@ -1143,7 +1148,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         offer(std::move(refit));
       }
     }
-    if (best.ok) {
+    if (best.ok && o.continue_ends) {
       report("continuing the best patch's motion past its ends");
       best = continued(surface, std::move(best), covered, area, o);
     }
@@ -1202,6 +1207,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     PatchOptions po = o.patch;
     po.fit.fixed_tool.reset();
     po.trim_gouges = true;
+    po.solid_cutter_on_phi = true;  // motions continued past Φ's ends among them
     po.orient_by_part = false;
     std::vector<FitResult> joint;
     for (const Chosen& c : chosen) joint.push_back(c.fit.fit);
@@ -1215,6 +1221,10 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         f.holder_lengthened = 0;
         f = po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
         if (!machinable(f)) break;
+        // What is kept, in the first motion's t as before (a continued motion reaches beyond [0, 1]).
+        const double from = chosen[k].fit.t_from, w = chosen[k].fit.t_to - from;
+        f.t_to = f.t_to == 1 ? chosen[k].fit.t_to : from + w * f.t_to;
+        f.t_from = f.t_from == 0 ? from : from + w * f.t_from;
         refit.push_back(std::move(f));
       }
     } catch (const InputError&) {

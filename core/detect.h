@@ -56,6 +56,10 @@ struct CoverOptions {
   int regions = 2;
   double region_min = 0.01;
   double region_below = 0.5;
+  // Each round's best patch continued past the ends of its motion where its last row of Ω still lies
+  // over Φ (detect.cpp, `continued`). Off for the one-patch search of an uncovered region: its patch
+  // is continued on the whole surface, as the round's best, where its end is judged.
+  bool continue_ends = true;
   PatchOptions patch;      // fit, exploration, propagation, machined surface, tolerance
   // Tool policy (issue 14). Default: one custom tool per patch, fitted with it.
   // patch.fit.fixed_tool set (a catalogue tool): every candidate's motion is fitted to that tool,

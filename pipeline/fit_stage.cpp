@@ -453,7 +453,7 @@ void fit_earlier_passes(const Job& job, const FitOptions& fit, FittedJob& out, c
       const double w = fp.fit.t_to - fp.fit.t_from;
       const double tau0 = std::max(0.0, -fp.fit.t_from) / w, tau1 = 1 - std::max(0.0, fp.fit.t_to - 1) / w;
       FitResult r;
-      if (tau0 > 0 || tau1 < 1) {
+      if ((tau0 > 0 || tau1 < 1) && tau1 - tau0 > 0.02) {  // (a kept stretch wholly beyond the fit: as it is)
         const FitResult inner = optimize_motion(target, trimmed(fp.fit.fit.rails, tau0, tau1), o);
         r = optimize_motion(target, continued(inner.rails, tau0 / (tau1 - tau0), (1 - tau1) / (tau1 - tau0)), o);
       } else {
