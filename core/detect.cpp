@@ -807,12 +807,9 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
     if (!(g > f.gain + 1e-4)) break;
     // The kept stretch in the first motion's t; an end trimmed back (a gouge or the part) or beyond
     // Φ is not continued further.
-    const double u0 = p.t_from == 0 ? -b : -b + (1 + a + b) * p.t_from;  // exact at an end kept whole
-    const double u1 = p.t_to == 1 ? 1 + a : -b + (1 + a + b) * p.t_to;
     ends[0] = ends[0] && p.t_from == 0 && over_phi(p.machined, 0);
     ends[1] = ends[1] && p.t_to == 1 && over_phi(p.machined, p.machined.omega.n_t - 1);
-    p.t_from = t_from + w * u0;
-    p.t_to = t_from + w * u1;
+    std::tie(p.t_from, p.t_to) = kept_within(t_from - w * b, t_from + w * (1 + a), p.t_from, p.t_to);
     f.fit = std::move(p);
     f.gain = g;
     before = kb, after = ka;
@@ -1222,9 +1219,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         f = po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
         if (!machinable(f)) break;
         // What is kept, in the first motion's t as before (a continued motion reaches beyond [0, 1]).
-        const double from = chosen[k].fit.t_from, w = chosen[k].fit.t_to - from;
-        f.t_to = f.t_to == 1 ? chosen[k].fit.t_to : from + w * f.t_to;
-        f.t_from = f.t_from == 0 ? from : from + w * f.t_from;
+        std::tie(f.t_from, f.t_to) = kept_within(chosen[k].fit.t_from, chosen[k].fit.t_to, f.t_from, f.t_to);
         refit.push_back(std::move(f));
       }
     } catch (const InputError&) {

@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <tuple>
 
 #include "core/collision.h"
 #include "core/errors.h"
@@ -438,9 +439,7 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
       out.check_refused = check && std::any_of(profile.intrusion.begin(), profile.intrusion.end(), [](double v) { return v > 0; });
       break;
     }
-    const double w = out.t_to - out.t_from;
-    out.t_to = out.t_from + w * t1;
-    out.t_from += w * t0;
+    std::tie(out.t_from, out.t_to) = kept_within(out.t_from, out.t_to, t0, t1);
     out.fit.rails = trimmed(out.fit.rails, t0, t1);
     out.machined = machined_surface(surface, out.fit.rails, out.fit.tool, o.machined);
     current = false;
@@ -471,36 +470,41 @@ bool machinable(const PatchFit& f) {
   return !tool_defect(f.fit.tool, f.fit.rails.length) && !f.gouges && !f.check_refused && !(f.check_intrusion > 0);
 }
 
-Rails trimmed(const Rails& r, double t0, double t1) {
+namespace {
+// The rails over [t0, t1] of `point(rail, t)`, reparametrised to [0, 1] by least squares on dense
+// samples (same control point count).
+template <class Point>
+Rails resampled(const Rails& r, double t0, double t1, Point point) {
   const int samples = std::max(8 * r.a.size(), 200);
   Eigen::MatrixXd A(samples, 3), B(samples, 3);
   const std::vector<double> ts = uniform_parameters(samples);
   for (int i = 0; i < samples; ++i) {
     const double t = t0 + (t1 - t0) * ts[size_t(i)];
-    A.row(i) = r.a.point(t).transpose();
-    B.row(i) = r.b.point(t).transpose();
+    A.row(i) = point(r.a, t).transpose();
+    B.row(i) = point(r.b, t).transpose();
   }
   return {fit_bspline(A, ts, r.a.size()), fit_bspline(B, ts, r.b.size()), r.length};
+}
+}  // namespace
+
+Rails trimmed(const Rails& r, double t0, double t1) {
+  return resampled(r, t0, t1, [](const BSpline& c, double t) { return c.point(t); });
 }
 
 Rails continued(const Rails& r, double before, double after) {
   // Each rail beyond an end along its chord over the last `step` of t (a least-squares spline's end
   // derivatives swing; its end span's cubic continued leaves the motion within a tenth of its length).
   constexpr double step = 0.05;
-  const auto along = [&](const BSpline& c, double t) -> Eigen::Vector3d {
+  return resampled(r, -before, 1 + after, [&](const BSpline& c, double t) -> Eigen::Vector3d {
     if (t < 0) return c.point(0) + t * (c.point(step) - c.point(0)) / step;
     if (t > 1) return c.point(1) + (t - 1) * (c.point(1) - c.point(1 - step)) / step;
     return c.point(t);
-  };
-  const int samples = std::max(8 * r.a.size(), 200);
-  Eigen::MatrixXd A(samples, 3), B(samples, 3);
-  const std::vector<double> ts = uniform_parameters(samples);
-  for (int i = 0; i < samples; ++i) {
-    const double t = -before + (1 + before + after) * ts[size_t(i)];
-    A.row(i) = along(r.a, t).transpose();
-    B.row(i) = along(r.b, t).transpose();
-  }
-  return {fit_bspline(A, ts, r.a.size()), fit_bspline(B, ts, r.b.size()), r.length};
+  });
+}
+
+std::pair<double, double> kept_within(double from, double to, double t0, double t1) {
+  const double w = to - from;
+  return {t0 == 0 ? from : from + w * t0, t1 == 1 ? to : from + w * t1};
 }
 
 PatchFit reversed(PatchFit f) {

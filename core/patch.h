@@ -117,6 +117,10 @@ struct ToolCut {
 // continued straight past its ends, as the start of a motion fitted further (detection).
 [[nodiscard]] Rails continued(const Rails& rails, double before, double after);
 
+// The stretch [t0, t1] of a motion that is itself the stretch [from, to] of an earlier one, in the
+// earlier one's t: an end left where it was (t0 = 0, t1 = 1) keeps its value exactly.
+[[nodiscard]] std::pair<double, double> kept_within(double from, double to, double t0, double t1);
+
 // The same swept tool with its ends exchanged: rails a <-> b and d(s) -> d(1 - s) (the clamped
 // uniform knots are symmetric, so reversing the radius coefficients reverses d for every shape).
 // The envelope, its errors and coverage are unchanged; only which end is the tip changes.
