@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <tuple>
 #include <memory>
 #include <optional>
 
@@ -160,27 +161,30 @@ std::vector<ToolPose> poses_mm(const Job& job, const Similarity& frame, const Ra
 }
 }  // namespace
 
-void check_job(const Job& job, FittedJob& f, const Progress& progress) {
-  // The design surface in mm: contact points; it is the part too unless a separate one is given.
-  // With a separate part the part's own twin of the design surface is left out (fit_job) and the
-  // design surface is checked instead, with the fitted tolerance; the rest with check_tolerance.
-  const SurfaceIndex design(f.surface.mesh);
-  std::optional<SurfaceIndex> check_index;
-  if (f.check_part) check_index.emplace(*f.check_part);
-  progress(fmt::format("collision checks against {} ({} triangles), clearance {} mm", job.part.string(),
-                       f.part ? f.part->faces.size() : f.surface.mesh.faces.size(), job.clearance_mm));
-  CollisionOptions o;
-  o.clearance_mm = job.clearance_mm;
-  o.gouge_tolerance_mm = job.tolerance_mm;
-  CollisionOptions o_part = o;
-  const CutJudgement judged = cut_judgement(job, f.check_twin_sag_mm);
-  o_part.gouge_tolerance_mm = judged.part_mm;
-  o_part.design = &design;
-  o_part.design_within_mm = judged.design_within_mm;
-  const auto check = [&](const std::vector<ToolPose>& poses, const ToolAssembly& assembly) {
-    CollisionReport r = check_collisions(design, poses, assembly, o);
-    if (check_index) {
-      const CollisionReport c = check_collisions(*check_index, poses, assembly, o_part);
+namespace {
+// The run's collision check of a job's motions: the design surface in mm (contact points; it is the
+// part too unless a separate one is given), and with a separate part the part without Φ's coarser
+// twin (fit_job), judged with check_tolerance while the design surface is judged with the fitted
+// tolerance.
+class PartCheck {
+ public:
+  PartCheck(const Job& job, const FittedJob& f) : design_(f.surface.mesh) {
+    if (f.check_part) check_index_.emplace(*f.check_part);
+    o_.clearance_mm = job.clearance_mm;
+    o_.gouge_tolerance_mm = job.tolerance_mm;
+    o_part_ = o_;
+    const CutJudgement judged = cut_judgement(job, f.check_twin_sag_mm);
+    o_part_.gouge_tolerance_mm = judged.part_mm;
+    o_part_.design = &design_;
+    o_part_.design_within_mm = judged.design_within_mm;
+  }
+  PartCheck(const PartCheck&) = delete;
+  PartCheck& operator=(const PartCheck&) = delete;
+  const SurfaceIndex& design() const { return design_; }
+  CollisionReport operator()(const std::vector<ToolPose>& poses, const ToolAssembly& assembly) const {
+    CollisionReport r = check_collisions(design_, poses, assembly, o_);
+    if (check_index_) {
+      const CollisionReport c = check_collisions(*check_index_, poses, assembly, o_part_);
       r.intervals.insert(r.intervals.end(), c.intervals.begin(), c.intervals.end());
       r.positions_checked = std::max(r.positions_checked, c.positions_checked);
       r.queries += c.queries;
@@ -189,7 +193,31 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
       });
     }
     return r;
-  };
+  }
+  // The patch's motion and its earlier passes' (their poses, the same tool; their intervals index
+  // their own poses, which index like the last pass's).
+  CollisionReport patch(const FittedPatch& p) const {
+    CollisionReport r = (*this)(p.poses, p.assembly);
+    for (const PassMotion& pm : p.earlier_passes) {
+      const CollisionReport c = (*this)(pm.poses, p.assembly);
+      r.intervals.insert(r.intervals.end(), c.intervals.begin(), c.intervals.end());
+      r.positions_checked += c.positions_checked;
+    }
+    return r;
+  }
+
+ private:
+  SurfaceIndex design_;
+  std::optional<SurfaceIndex> check_index_;
+  CollisionOptions o_, o_part_;
+};
+}  // namespace
+
+void check_job(const Job& job, FittedJob& f, const Progress& progress) {
+  progress(fmt::format("collision checks against {} ({} triangles), clearance {} mm", job.part.string(),
+                       f.part ? f.part->faces.size() : f.surface.mesh.faces.size(), job.clearance_mm));
+  const PartCheck check(job, f);
+  const SurfaceIndex& design = check.design();
   for (FittedPatch& p : f.patches) {
     const FitResult& r = p.fit.fit;
     // Radii that describe no tool (a stretch with few samples of Φ let them drift): nothing to check,
@@ -210,15 +238,61 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
     const double half = 0.5 * p.assembly.cutter_length();
     p.contacts.clear();
     for (const ToolPose& q : p.poses) p.contacts.push_back(design.closest(q.tip + half * q.axis).point);
-    p.collisions = check(p.poses, p.assembly);
     for (PassMotion& pm : p.earlier_passes) {  // earlier passes: their own poses, the same tool
       pm.poses = poses_mm(job, f.frame, pm.rails);
       pm.contacts.clear();
       for (const ToolPose& q : pm.poses) pm.contacts.push_back(design.closest(q.tip + half * q.axis).point);
-      const CollisionReport c = check(pm.poses, p.assembly);
-      p.collisions.intervals.insert(p.collisions.intervals.end(), c.intervals.begin(), c.intervals.end());
-      p.collisions.positions_checked += c.positions_checked;
     }
+    p.collisions = check.patch(p);
+    for (const std::string& line : collision_summary(p)) progress(line);
+  }
+}
+
+void shorten_to_clear(const Job& job, FittedJob& f, const Progress& progress) {
+  std::vector<std::optional<KeptPoses>> keep(f.patches.size());
+  for (size_t k = 0; k < f.patches.size(); ++k) {
+    const FittedPatch& p = f.patches[k];
+    const size_t n = p.poses.size();
+    if (p.collisions.clear() || n < 2) continue;
+    // The longest run of poses in no interval: the positions between two of its poses are clear too
+    // (an interval names the pose at or before each colliding position).
+    std::vector<char> hit(n, 0);
+    for (const CollisionInterval& iv : p.collisions.intervals)
+      for (int i = std::max(iv.pose_begin, 0); i <= iv.pose_end && size_t(i) < n; ++i) hit[size_t(i)] = 1;
+    size_t best0 = 0, best_len = 0;
+    for (size_t i = 0; i < n;) {
+      if (hit[i]) {
+        ++i;
+        continue;
+      }
+      size_t j = i;
+      while (j < n && !hit[j]) ++j;
+      if (j - i > best_len) best0 = i, best_len = j - i;
+      i = j;
+    }
+    // Three quarters of the motion at least: the run's check overrules the fit's near the ends of
+    // what the fit kept (its samples missed a part point the check sees); a motion colliding over more
+    // than a quarter is refused, its collisions reported, as is a motion whose overtravel (the job's,
+    // beyond both ends) would be lost.
+    if (4 * best_len < 3 * n || (job.overtravel_mm > 0 && (best0 > 0 || best0 + best_len < n))) continue;
+    const CollisionInterval& worst = *std::max_element(
+        p.collisions.intervals.begin(), p.collisions.intervals.end(),
+        [](const CollisionInterval& a, const CollisionInterval& b) { return a.max_depth_mm < b.max_depth_mm; });
+    keep[k] = KeptPoses{best0, best0 + best_len - 1,
+                        worst.max_depth_mm >= 0
+                            ? fmt::format("beyond them the {} would {} {:.3f} mm deep", to_string(worst.component),
+                                          worst.component == Component::Tool ? "gouge" : "collide", worst.max_depth_mm)
+                            : fmt::format("beyond them the {} would come {:.3f} mm from the part, inside the clearance",
+                                          to_string(worst.component), -worst.max_depth_mm)};
+  }
+  if (std::none_of(keep.begin(), keep.end(), [](const auto& k) { return k.has_value(); })) return;
+  keep_poses(job, f, keep, &FittedPatch::kept_clear, "to their clear stretches", progress);
+  // Checked again as they are now: what is still not clear is refused as before.
+  const PartCheck check(job, f);
+  for (size_t k = 0; k < f.patches.size(); ++k) {
+    if (!keep[k]) continue;
+    FittedPatch& p = f.patches[k];
+    p.collisions = check.patch(p);
     for (const std::string& line : collision_summary(p)) progress(line);
   }
 }
@@ -735,6 +809,9 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
   }
   // flankcam run: the cut shortened where its lead had no clear point (kept_t above is after it).
   if (!p.kept_for_leads.empty()) j["shortened_for_leads"] = p.kept_for_leads;
+  // The cut shortened to its longest stretch clear of collisions (the run's check found the rest not
+  // clear; kept_t above is after it).
+  if (!p.kept_clear.empty()) j["shortened_clear_of_collisions"] = p.kept_clear;
   j["collision_check"] = {{"part", job.part.string()},
                           {"clearance_mm", job.clearance_mm},
                           {"gouge_tolerance_mm", job.tolerance_mm},
@@ -802,7 +879,8 @@ ClProgram pass_program(const Job& job, const FittedJob& f, const FittedPatch& p,
   return cl;
 }
 
-void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<KeptPoses>>& keep, const Progress& progress) {
+void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<KeptPoses>>& keep, std::string FittedPatch::*note,
+                const std::string& shortened, const Progress& progress) {
   if (std::none_of(keep.begin(), keep.end(), [](const auto& k) { return k.has_value(); })) return;
   std::optional<SurfaceIndex> design;  // Φ (unit frame), built for the first patch judged against it
   const double tolerance = f.frame.length_to_unit(job.tolerance_mm);
@@ -816,11 +894,10 @@ void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<Ke
     if (!(i0 < i1)) throw InputError(fmt::format("patch {}: keep_poses: poses {}-{} of {}", p.job->name, i0, i1, p.poses.size()));
     // The rails between the kept poses' parameters (an overtravel pose kept: its end of the motion).
     const auto t_of = [&](size_t i) { return double(std::clamp<long>(long(i) - long(before), 0, m - 1)) / (m - 1); };
-    const double t0 = t_of(i0), t1 = t_of(i1), w = p.fit.t_to - p.fit.t_from;
+    const double t0 = t_of(i0), t1 = t_of(i1);
     const double coverage_before = p.fit.coverage;
     p.fit.fit.rails = trimmed(p.fit.fit.rails, t0, t1);
-    p.fit.t_to = p.fit.t_from + w * t1;
-    p.fit.t_from += w * t0;
+    std::tie(p.fit.t_from, p.fit.t_to) = kept_within(p.fit.t_from, p.fit.t_to, t0, t1);
     // Judged against the fit's target: Φ, or Φ offset by the allowance.
     const double allowance = job.passes_mm.empty() ? job.allowance_mm : job.passes_mm.back();
     std::optional<SurfaceIndex> offset;
@@ -838,9 +915,9 @@ void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<Ke
     for (PassMotion& pm : p.earlier_passes) cut(pm.contacts), cut(pm.poses);  // their poses index like the last pass's
     cut(p.contacts);
     cut(p.poses);
-    p.kept_for_leads = fmt::format("poses {}-{} of {} kept (t {:.3f}-{:.3f}): {}", i0 + 1, i1 + 1, total,
-                                   p.fit.t_from, p.fit.t_to, keep[k]->why);
-    progress(fmt::format("patch {}: {}; coverage {:.1f}% -> {:.1f}%", p.job->name, p.kept_for_leads, 100 * coverage_before,
+    p.*note = fmt::format("poses {}-{} of {} kept (t {:.3f}-{:.3f}): {}", i0 + 1, i1 + 1, total, p.fit.t_from, p.fit.t_to,
+                          keep[k]->why);
+    progress(fmt::format("patch {}: {}; coverage {:.1f}% -> {:.1f}%", p.job->name, p.*note, 100 * coverage_before,
                          100 * p.fit.coverage));
   }
   if (!f.cover) return;
@@ -857,7 +934,7 @@ void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<Ke
     x = f.frame.length_to_mm(x);
   }
   c.overcut_mm = f.frame.length_to_mm(c.overcut_mm);
-  progress(cover_summary(job, f) + " after the cuts were shortened for their leads");
+  progress(cover_summary(job, f) + " after the cuts were shortened " + shortened);
 }
 
 ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p, int tool) {

@@ -49,6 +49,9 @@ struct FittedPatch {
   // flankcam run: the motion shortened at an end whose lead had no clear point ("poses A-B of N kept
   // (t ..): no lead-out off ..."); empty: the whole motion is cut.
   std::string kept_for_leads;
+  // The motion shortened to its longest stretch of poses clear of collisions ("poses A-B of N kept
+  // (t ..): beyond them the shank would come ..."): shorten_to_clear; empty: not shortened.
+  std::string kept_clear;
 };
 
 // `patches: auto`: the whole surface as the union of the detected patches (core/detect.h).
@@ -141,8 +144,18 @@ struct KeptPoses {
 // Each patch with a `keep` entry shortened to those poses (flankcam run: the cut entered and left
 // where the link planner finds clear leads): its poses and contacts (and its earlier passes'), its
 // rails trimmed to the same stretch, its machined surface and coverage anew, and with `patches: auto`
-// the cover's union; one progress line each.
-void keep_poses(const Job& job, FittedJob& fitted, const std::vector<std::optional<KeptPoses>>& keep, const Progress& progress);
+// the cover's union; one progress line each, the reason in `note`, the union's line saying they were
+// shortened `shortened`.
+void keep_poses(const Job& job, FittedJob& fitted, const std::vector<std::optional<KeptPoses>>& keep, std::string FittedPatch::*note,
+                const std::string& shortened, const Progress& progress);
+
+// Every patch the collision check found not clear (collisions, gouges or a shank or holder inside the
+// clearance) whose longest stretch of clear poses is at least three quarters of its motion, its
+// overtravel poses among them, shortened to that stretch (keep_poses; the reason in
+// FittedPatch::kept_clear) and checked again: a program for what can be cut instead of none where the
+// fit's check missed what the collision check sees near the ends of its motion. Not for
+// `--allow-collisions` (the user posts the whole motion).
+void shorten_to_clear(const Job& job, FittedJob& fitted, const Progress& progress);
 
 // The patch's CL-data (APT model): approach, the fitted poses at the job's feed, retract; the tool's
 // meridian in mm; a comment with the fitted error and one flagging allowed collisions.

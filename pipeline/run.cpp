@@ -145,6 +145,7 @@ FitRun fit_run(Job job, const RunOptions& o, ToolOf tool_of) {
   r.job = std::move(job);
   r.allow_collisions = o.allow_collisions;
   r.fitted = fit_job(r.job, o.threads, o.progress);
+  if (!o.allow_collisions) shorten_to_clear(r.job, r.fitted, o.progress);
   r.cl_data.resize(r.fitted.patches.size());
   for (size_t k = 0; k < r.fitted.patches.size(); ++k) {
     const FittedPatch& p = r.fitted.patches[k];
@@ -385,7 +386,7 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
     if (!(i0 < i1)) throw refuse(p, why);
     keep[k] = KeptPoses{i0, i1, why};
   }
-  keep_poses(j, r.fit.fitted, keep, options.progress);
+  keep_poses(j, r.fit.fitted, keep, &FittedPatch::kept_for_leads, "for their leads", options.progress);
   std::vector<PostInput> inputs;  // work coordinates
   for (size_t k = 0; k < patches; ++k) {
     const FittedPatch& p = r.fit.fitted.patches[k];

@@ -294,3 +294,98 @@ TEST_CASE("flankcam run: a cut whose end has no clear lead is shortened to where
   CHECK(posted);
   CHECK(std::any_of(progress.begin(), progress.end(), [](const std::string& s) { return s.find("kept (t ") != std::string::npos; }));
 }
+
+TEST_CASE("flankcam run: a motion whose shank comes inside the clearance at its end is shortened to its clear poses and checked again" *
+          doctest::test_suite("heavy")) {
+  // The blade's patch fitted without a part. Then a block the fit never saw (the part the collision
+  // check judges: the job's part without the blade's twin) 0.25 mm off the shank at the last poses:
+  // the check finds the shank inside the 0.5 mm clearance there. The motion is shortened to its
+  // longest clear stretch of poses (over three quarters of it), its coverage judged anew, and the
+  // check of what is kept is clean.
+  test::ScratchDir dir("clear-stretch");
+  test::write_text(dir.file("job.yaml"),
+                   blade_job("tool: {shape: cone}\nholder: {shank_length: 20, shank_diameter: 6, length: 30, diameter: 20}\n"
+                             "clearance: 0.5\n"));
+  const pipeline::Job job = pipeline::read_job(dir.file("job.yaml"));
+  const pipeline::FitRun plain = pipeline::fit(pipeline::read_job(dir.file("job.yaml")), {});
+  pipeline::FittedJob f = plain.fitted;
+  const pipeline::FittedPatch& p0 = plain.fitted.patches.at(0);
+  REQUIRE(p0.collisions.clear());
+  const size_t n = p0.poses.size();
+  REQUIRE(n > 20);
+  // The shank's side away from the blade at the last pose, 5 mm above the cutter's end.
+  const ToolPose& end = p0.poses.back();
+  const double L = p0.assembly.cutter_length(), rs = 0.5 * p0.assembly.shank_diameter;
+  REQUIRE(rs == doctest::Approx(3));
+  const Eigen::Vector3d at = end.tip + (L + 5) * end.axis.normalized();
+  const double side = (end.tip + 0.5 * L * end.axis - p0.contacts.back()).y() > 0 ? 1 : -1;
+  const double forward = end.tip.x() > p0.poses.front().tip.x() ? 1 : -1;
+  double face = -INFINITY;  // the shank's outermost y towards `side` over z in [L + 4, L + 6]
+  for (double z = L + 4; z <= L + 6; z += 0.1) face = std::max(face, side * (end.tip + z * end.axis.normalized()).y() + rs);
+  const double y0 = side * (face + 0.25), y1 = side * (face + 2);
+  const double xa = at.x() - forward * 0.5, xb = at.x() + forward * 3;
+  f.check_part = test::box_mesh({std::min(xa, xb), std::min(y0, y1), at.z() - 0.5}, {std::max(xa, xb), std::max(y0, y1), at.z() + 0.5});
+  std::vector<std::string> progress;
+  const auto log = [&](const std::string& s) { progress.push_back(s); };
+  pipeline::check_job(job, f, log);
+  const pipeline::FittedPatch& p = f.patches.at(0);
+  REQUIRE_FALSE(p.collisions.clear());
+  for (const CollisionInterval& iv : p.collisions.intervals) {
+    CHECK(iv.component == Component::Shank);
+    CHECK(iv.max_depth_mm < 0);                      // inside the clearance, not into the shank
+    CHECK(iv.max_depth_mm == doctest::Approx(-0.25).epsilon(0.2));
+    CHECK(size_t(iv.pose_end) == n - 1);              // at the end of the motion only
+    CHECK(size_t(iv.pose_begin) > n / 2);
+  }
+  const size_t first_hit = size_t(p.collisions.intervals.front().pose_begin);
+  pipeline::shorten_to_clear(job, f, log);
+  INFO(p.kept_clear);
+  REQUIRE_FALSE(p.kept_clear.empty());
+  CHECK(p.kept_clear.find("beyond them the shank would come") != std::string::npos);
+  CHECK(p.kept_for_leads.empty());
+  // Kept: every pose before the first colliding one, nothing after; checked again, clear.
+  CHECK(p.poses.size() == first_hit);
+  CHECK(p.poses.front().tip.isApprox(p0.poses.front().tip, 1e-12));
+  CHECK(p.poses.back().tip.isApprox(p0.poses[first_hit - 1].tip, 1e-12));
+  CHECK(p.collisions.clear());
+  CHECK(p.collisions.positions_checked > 0);
+  CHECK(p.fit.t_from == doctest::Approx(p0.fit.t_from));
+  CHECK(p.fit.t_to < p0.fit.t_to);
+  CHECK(p.fit.t_to == doctest::Approx(p0.fit.t_from + (p0.fit.t_to - p0.fit.t_from) * double(first_hit - 1) / double(n - 1)));
+  // Judged anew: less covered than the whole motion, most of it kept.
+  MESSAGE("coverage ", p0.fit.coverage, " -> ", p.fit.coverage, ", poses ", n, " -> ", p.poses.size());
+  CHECK(p.fit.coverage < p0.fit.coverage);
+  CHECK(p.fit.coverage > 0.5 * p0.fit.coverage);
+  CHECK(std::any_of(progress.begin(), progress.end(), [](const std::string& s) { return s.find("kept (t ") != std::string::npos; }));
+  // A block beside the middle of the motion as well: no clear stretch of three quarters of the motion
+  // is left, and the motion is refused whole, its collisions reported, as before.
+  pipeline::FittedJob g = plain.fitted;
+  const ToolPose& mid = p0.poses[n / 2];
+  const Eigen::Vector3d am = mid.tip + (L + 5) * mid.axis.normalized();
+  double face_m = -INFINITY;
+  for (double z = L + 4; z <= L + 6; z += 0.1) face_m = std::max(face_m, side * (mid.tip + z * mid.axis.normalized()).y() + rs);
+  const double m0 = side * (face_m + 0.25), m1 = side * (face_m + 2);
+  g.check_part = test::merged(*f.check_part, test::box_mesh({am.x() - 0.3, std::min(m0, m1), am.z() - 0.5},
+                                                            {am.x() + 0.3, std::max(m0, m1), am.z() + 0.5}));
+  pipeline::check_job(job, g, log);
+  REQUIRE(g.patches.at(0).collisions.intervals.size() >= 2);
+  pipeline::shorten_to_clear(job, g, log);
+  const pipeline::FittedPatch& q = g.patches.at(0);
+  CHECK_FALSE(q.collisions.clear());
+  CHECK(q.kept_clear.empty());
+  CHECK(q.poses.size() == n);
+  CHECK(q.fit.t_to == p0.fit.t_to);
+  // The first block alone with the job's overtravel: the overtravel pose is the user's and would be
+  // lost, so the motion is refused whole too.
+  pipeline::Job over = job;
+  over.overtravel_mm = 2;
+  pipeline::FittedJob h = plain.fitted;
+  h.check_part = f.check_part;
+  pipeline::check_job(over, h, log);
+  REQUIRE(h.patches.at(0).poses.size() == n + 2);
+  REQUIRE_FALSE(h.patches.at(0).collisions.clear());
+  pipeline::shorten_to_clear(over, h, log);
+  CHECK_FALSE(h.patches.at(0).collisions.clear());
+  CHECK(h.patches.at(0).kept_clear.empty());
+  CHECK(h.patches.at(0).poses.size() == n + 2);
+}
