@@ -272,9 +272,9 @@ void shorten_to_clear(const Job& job, FittedJob& f, const Progress& progress) {
     }
     // Three quarters of the motion at least: the run's check overrules the fit's near the ends of
     // what the fit kept (its samples missed a part point the check sees); a motion colliding over more
-    // than a quarter is refused, its collisions reported, as is a motion whose overtravel (the job's,
-    // beyond both ends) would be lost.
-    if (4 * best_len < 3 * n || (job.overtravel_mm > 0 && (best0 > 0 || best0 + best_len < n))) continue;
+    // than a quarter is refused, its collisions reported, and so is any with the job's overtravel
+    // (the overtravel poses beyond both ends are the user's: shortened, one would be lost).
+    if (4 * best_len < 3 * n || job.overtravel_mm > 0) continue;
     const CollisionInterval& worst = *std::max_element(
         p.collisions.intervals.begin(), p.collisions.intervals.end(),
         [](const CollisionInterval& a, const CollisionInterval& b) { return a.max_depth_mm < b.max_depth_mm; });
@@ -287,7 +287,8 @@ void shorten_to_clear(const Job& job, FittedJob& f, const Progress& progress) {
   }
   if (std::none_of(keep.begin(), keep.end(), [](const auto& k) { return k.has_value(); })) return;
   keep_poses(job, f, keep, &FittedPatch::kept_clear, "to their clear stretches", progress);
-  // Checked again as they are now: what is still not clear is refused as before.
+  // Checked again as they are now (the positions between the kept poses are those checked before, so
+  // this finds nothing unless the kept motion differs from them): what is not clear is refused.
   const PartCheck check(job, f);
   for (size_t k = 0; k < f.patches.size(); ++k) {
     if (!keep[k]) continue;
@@ -885,19 +886,30 @@ void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<Ke
   std::optional<SurfaceIndex> design;  // Φ (unit frame), built for the first patch judged against it
   const double tolerance = f.frame.length_to_unit(job.tolerance_mm);
   const MachinedSurfaceOptions mo = machined_options(job, f.frame);
-  const int m = job.fit.samples_t;
   const size_t before = job.overtravel_mm > 0 ? 1 : 0;  // poses_mm: the overtravel pose before t = 0
   for (size_t k = 0; k < keep.size() && k < f.patches.size(); ++k) {
     if (!keep[k]) continue;
     FittedPatch& p = f.patches[k];
     const size_t i0 = keep[k]->first, i1 = std::min(keep[k]->last, p.poses.size() - 1);
-    if (!(i0 < i1)) throw InputError(fmt::format("patch {}: keep_poses: poses {}-{} of {}", p.job->name, i0, i1, p.poses.size()));
+    if (!(i0 < i1) || p.poses.size() < 2 * before + 2)
+      throw InputError(fmt::format("patch {}: keep_poses: poses {}-{} of {}", p.job->name, i0, i1, p.poses.size()));
     // The rails between the kept poses' parameters (an overtravel pose kept: its end of the motion).
-    const auto t_of = [&](size_t i) { return double(std::clamp<long>(long(i) - long(before), 0, m - 1)) / (m - 1); };
+    // The poses lie evenly in t over the rails (poses_mm, or a stretch of them kept before, whose
+    // rails were trimmed to it): m of them besides the overtravel poses.
+    const long m = long(p.poses.size() - 2 * before);
+    const auto t_of = [&](size_t i) { return double(std::clamp<long>(long(i) - long(before), 0, m - 1)) / double(m - 1); };
     const double t0 = t_of(i0), t1 = t_of(i1);
     const double coverage_before = p.fit.coverage;
     p.fit.fit.rails = trimmed(p.fit.fit.rails, t0, t1);
     std::tie(p.fit.t_from, p.fit.t_to) = kept_within(p.fit.t_from, p.fit.t_to, t0, t1);
+    // Earlier passes: their poses index like the last pass's, at the same t of their own rails.
+    for (PassMotion& pm : p.earlier_passes) {
+      pm.rails = trimmed(pm.rails, t0, t1);
+      const SurfaceIndex pass_target(pm.allowance_mm > 0 ? offset_mesh(f.unit_surface, f.frame.length_to_unit(pm.allowance_mm),
+                                                                        p.allowance_side)
+                                                          : f.unit_surface);
+      pm.coverage = coverage(pass_target.mesh(), machined_surface(pass_target, pm.rails, p.fit.fit.tool).design_deviation, tolerance);
+    }
     // Judged against the fit's target: Φ, or Φ offset by the allowance.
     const double allowance = job.passes_mm.empty() ? job.allowance_mm : job.passes_mm.back();
     std::optional<SurfaceIndex> offset;

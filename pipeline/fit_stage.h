@@ -142,16 +142,16 @@ struct KeptPoses {
   std::string why;
 };
 // Each patch with a `keep` entry shortened to those poses (flankcam run: the cut entered and left
-// where the link planner finds clear leads): its poses and contacts (and its earlier passes'), its
-// rails trimmed to the same stretch, its machined surface and coverage anew, and with `patches: auto`
+// where the link planner finds clear leads): its poses and contacts (and its earlier passes', their
+// rails and coverage too), its rails trimmed to the same stretch, its machined surface and coverage anew, and with `patches: auto`
 // the cover's union; one progress line each, the reason in `note`, the union's line saying they were
 // shortened `shortened`.
 void keep_poses(const Job& job, FittedJob& fitted, const std::vector<std::optional<KeptPoses>>& keep, std::string FittedPatch::*note,
                 const std::string& shortened, const Progress& progress);
 
 // Every patch the collision check found not clear (collisions, gouges or a shank or holder inside the
-// clearance) whose longest stretch of clear poses is at least three quarters of its motion, its
-// overtravel poses among them, shortened to that stretch (keep_poses; the reason in
+// clearance) whose longest stretch of clear poses is at least three quarters of its motion, shortened
+// to that stretch (not with the job's overtravel, whose poses would be lost) (keep_poses; the reason in
 // FittedPatch::kept_clear) and checked again: a program for what can be cut instead of none where the
 // fit's check missed what the collision check sees near the ends of its motion. Not for
 // `--allow-collisions` (the user posts the whole motion).

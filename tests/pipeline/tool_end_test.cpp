@@ -357,6 +357,47 @@ TEST_CASE("flankcam run: a motion whose shank comes inside the clearance at its 
   CHECK(p.fit.coverage < p0.fit.coverage);
   CHECK(p.fit.coverage > 0.5 * p0.fit.coverage);
   CHECK(std::any_of(progress.begin(), progress.end(), [](const std::string& s) { return s.find("kept (t ") != std::string::npos; }));
+  // Shortened again (as the run does for a lead with no clear point): the kept poses lie evenly over
+  // the trimmed rails, so dropping the last of them keeps t_to at that pose's t of the first motion,
+  // and the rails' end at that pose (an end kept keeps its t exactly).
+  {
+    pipeline::FittedJob again = f;
+    const size_t k = again.patches[0].poses.size();
+    const ToolPose last_kept = again.patches[0].poses[k - 2];
+    std::vector<std::optional<pipeline::KeptPoses>> keep{pipeline::KeptPoses{0, k - 2, "a lead"}};
+    pipeline::keep_poses(job, again, keep, &pipeline::FittedPatch::kept_for_leads, "for their leads", log);
+    const pipeline::FittedPatch& a = again.patches[0];
+    CHECK(a.poses.size() == k - 1);
+    CHECK(a.fit.t_from == p.fit.t_from);
+    CHECK(a.fit.t_to == doctest::Approx(p0.fit.t_from + (p0.fit.t_to - p0.fit.t_from) * double(first_hit - 2) / double(n - 1)));
+    const Eigen::Vector3d tip_end = again.frame.to_mm(a.fit.fit.rails.a.point(1));
+    CHECK((tip_end - last_kept.tip).norm() < 1e-3);
+  }
+  // With an earlier pass 0.3 mm off: its poses are cut like the last pass's, its rails trimmed to the
+  // same stretch (their end at its last kept pose) and its coverage judged anew.
+  {
+    test::write_text(dir.file("passes.yaml"),
+                     blade_job("tool: {shape: cone}\nholder: {shank_length: 20, shank_diameter: 6, length: 30, diameter: 20}\n"
+                               "clearance: 0.5\npasses: [{allowance: 0.3}, {allowance: 0}]\n"));
+    const pipeline::Job pj = pipeline::read_job(dir.file("passes.yaml"));
+    const pipeline::FitRun two = pipeline::fit(pipeline::read_job(dir.file("passes.yaml")), {});
+    pipeline::FittedJob t = two.fitted;
+    t.check_part = f.check_part;
+    pipeline::check_job(pj, t, log);
+    REQUIRE_FALSE(t.patches.at(0).collisions.clear());
+    REQUIRE(t.patches[0].earlier_passes.size() == 1);
+    const double pass_coverage = t.patches[0].earlier_passes[0].coverage;
+    pipeline::shorten_to_clear(pj, t, log);
+    const pipeline::FittedPatch& s2 = t.patches[0];
+    REQUIRE_FALSE(s2.kept_clear.empty());
+    CHECK(s2.collisions.clear());
+    const pipeline::PassMotion& rough = s2.earlier_passes[0];
+    CHECK(rough.poses.size() == s2.poses.size());
+    CHECK(rough.contacts.size() == s2.poses.size());
+    CHECK((t.frame.to_mm(rough.rails.a.point(1)) - rough.poses.back().tip).norm() < 1e-3);
+    CHECK((t.frame.to_mm(rough.rails.a.point(0)) - rough.poses.front().tip).norm() < 1e-3);
+    CHECK(rough.coverage < pass_coverage);
+  }
   // A block beside the middle of the motion as well: no clear stretch of three quarters of the motion
   // is left, and the motion is refused whole, its collisions reported, as before.
   pipeline::FittedJob g = plain.fitted;
