@@ -303,9 +303,9 @@ TEST_CASE("flankcam run: a motion whose shank comes inside the clearance at its 
   // longest clear stretch of poses (over three quarters of it), its coverage judged anew, and the
   // check of what is kept is clean.
   test::ScratchDir dir("clear-stretch");
-  test::write_text(dir.file("job.yaml"),
-                   blade_job("tool: {shape: cone}\nholder: {shank_length: 20, shank_diameter: 6, length: 30, diameter: 20}\n"
-                             "clearance: 0.5\n"));
+  const std::string tool = "tool: {shape: cone}\nholder: {shank_length: 20, shank_diameter: 6, length: 30, diameter: 20}\n"
+                           "clearance: 0.5\n";
+  test::write_text(dir.file("job.yaml"), blade_job(tool));
   const pipeline::Job job = pipeline::read_job(dir.file("job.yaml"));
   const pipeline::FitRun plain = pipeline::fit(pipeline::read_job(dir.file("job.yaml")), {});
   pipeline::FittedJob f = plain.fitted;
@@ -376,9 +376,7 @@ TEST_CASE("flankcam run: a motion whose shank comes inside the clearance at its 
   // With an earlier pass 0.3 mm off: its poses are cut like the last pass's, its rails trimmed to the
   // same stretch (their end at its last kept pose) and its coverage judged anew.
   {
-    test::write_text(dir.file("passes.yaml"),
-                     blade_job("tool: {shape: cone}\nholder: {shank_length: 20, shank_diameter: 6, length: 30, diameter: 20}\n"
-                               "clearance: 0.5\npasses: [{allowance: 0.3}, {allowance: 0}]\n"));
+    test::write_text(dir.file("passes.yaml"), blade_job(tool + "passes: [{allowance: 0.3}, {allowance: 0}]\n"));
     const pipeline::Job pj = pipeline::read_job(dir.file("passes.yaml"));
     const pipeline::FitRun two = pipeline::fit(pipeline::read_job(dir.file("passes.yaml")), {});
     pipeline::FittedJob t = two.fitted;
