@@ -89,19 +89,9 @@ std::vector<char> ungouged_rows(const MachinedSurface& ms, double tolerance) {
 
 // The longest run of good rows as [t0, t1] (rows at t = i / (n - 1)); {0, 0} with fewer than two.
 std::pair<double, double> longest_run(const std::vector<char>& ok) {
-  const int n = int(ok.size());
-  int best_lo = 0, best_len = 0;
-  for (int i = 0; i < n;) {
-    if (!ok[size_t(i)]) {
-      ++i;
-      continue;
-    }
-    int j = i;
-    while (j < n && ok[size_t(j)]) ++j;
-    if (j - i > best_len) best_len = j - i, best_lo = i;
-    i = j;
-  }
+  const auto [best_lo, best_len] = longest_set_run(ok);
   if (best_len < 2) return {0.0, 0.0};
+  const double n = double(ok.size());
   return {double(best_lo) / (n - 1), double(best_lo + best_len - 1) / (n - 1)};
 }
 
@@ -468,6 +458,21 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
 
 bool machinable(const PatchFit& f) {
   return !tool_defect(f.fit.tool, f.fit.rails.length) && !f.gouges && !f.check_refused && !(f.check_intrusion > 0);
+}
+
+std::pair<size_t, size_t> longest_set_run(const std::vector<char>& ok) {
+  size_t best_lo = 0, best_len = 0;
+  for (size_t i = 0; i < ok.size();) {
+    if (!ok[i]) {
+      ++i;
+      continue;
+    }
+    size_t j = i;
+    while (j < ok.size() && ok[j]) ++j;
+    if (j - i > best_len) best_len = j - i, best_lo = i;
+    i = j;
+  }
+  return {best_lo, best_len};
 }
 
 namespace {

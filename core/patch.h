@@ -117,6 +117,10 @@ struct ToolCut {
 // continued straight past its ends, as the start of a motion fitted further (detection).
 [[nodiscard]] Rails continued(const Rails& rails, double before, double after);
 
+// The longest run of set entries of `ok` (the first one on a tie) as (first index, count); count 0
+// when none is set.
+[[nodiscard]] std::pair<size_t, size_t> longest_set_run(const std::vector<char>& ok);
+
 // The stretch [t0, t1] of a motion that is itself the stretch [from, to] of an earlier one, in the
 // earlier one's t: an end left where it was (t0 = 0, t1 = 1) keeps its value exactly.
 [[nodiscard]] std::pair<double, double> kept_within(double from, double to, double t0, double t1);

@@ -6,9 +6,9 @@
 
 #include <algorithm>
 #include <cmath>
-#include <tuple>
 #include <memory>
 #include <optional>
+#include <tuple>
 
 #include "core/check_surface.h"
 #include "core/detect.h"
@@ -256,20 +256,10 @@ void shorten_to_clear(const Job& job, FittedJob& f, const Progress& progress) {
     if (p.collisions.clear() || n < 2) continue;
     // The longest run of poses in no interval: the positions between two of its poses are clear too
     // (an interval names the pose at or before each colliding position).
-    std::vector<char> hit(n, 0);
+    std::vector<char> clear(n, 1);
     for (const CollisionInterval& iv : p.collisions.intervals)
-      for (int i = std::max(iv.pose_begin, 0); i <= iv.pose_end && size_t(i) < n; ++i) hit[size_t(i)] = 1;
-    size_t best0 = 0, best_len = 0;
-    for (size_t i = 0; i < n;) {
-      if (hit[i]) {
-        ++i;
-        continue;
-      }
-      size_t j = i;
-      while (j < n && !hit[j]) ++j;
-      if (j - i > best_len) best0 = i, best_len = j - i;
-      i = j;
-    }
+      for (int i = std::max(iv.pose_begin, 0); i <= iv.pose_end && size_t(i) < n; ++i) clear[size_t(i)] = 0;
+    const auto [best0, best_len] = longest_set_run(clear);
     // Three quarters of the motion at least: the run's check overrules the fit's near the ends of
     // what the fit kept (its samples missed a part point the check sees); a motion colliding over more
     // than a quarter is refused, its collisions reported, and so is any with the job's overtravel
