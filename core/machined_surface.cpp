@@ -1,5 +1,6 @@
 #include "core/machined_surface.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <tuple>
@@ -156,6 +157,12 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
   // tool), Ω is not the surface left there. Judged at Ω's rows by the sphere at the vertex's
   // projection on the axis (a lower bound of the depth), between the end planes (above a rounded
   // end's side); such vertices are left uncovered by this patch.
+  // And the converse: Ω's nearest point can lie across Φ from a vertex the cutter never reaches (a
+  // sheet of Φ turned away from the tool, as where a blade's flank wraps round its leading edge):
+  // a vertex the side holds at most half as deep as Ω's overcut claims, less the tool's travel
+  // between rows, is not overcut by it (rotor 37: 0.67-1.15 mm "overcuts" of leading-edge vertices
+  // the cutter stays 0.1 mm off). A real overcut D is at least D deep in a convex cutter's side at
+  // the pose whose characteristic passes nearest, at most a row's travel from a row.
   {
     const int rows = o.grid_t;
     const double s_lo = end ? end->side_s : 0.0, margin = 1e-4 * rails.length;
@@ -165,19 +172,36 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
       at[size_t(i)] = motion.a(t);
       along[size_t(i)] = motion.b(t) - motion.a(t);
     }
+    // The cutter's largest radius and slope |d'| along the axis; a tool point's largest move between rows.
+    double widest = 0, slope = 0, travel = 0;
+    for (int k = 0; k <= 100; ++k) {
+      widest = std::max(widest, profile.d(k / 100.0));
+      slope = std::max(slope, std::abs(profile.d_s(k / 100.0)) / rails.length);
+    }
+    for (int i = 0; i + 1 < rows; ++i) {
+      const double ends = std::max((at[size_t(i + 1)] - at[size_t(i)]).norm(),
+                                   (at[size_t(i + 1)] + along[size_t(i + 1)] - at[size_t(i)] - along[size_t(i)]).norm());
+      travel = std::max(travel, ends + widest * (along[size_t(i + 1)].normalized() - along[size_t(i)].normalized()).norm());
+    }
+    // The sphere at the vertex's projection (clamped to the side) holds it at most slope²·radius / 2
+    // less deep than the deepest sphere of the side does; twice that is allowed for.
+    const double slack = travel + slope * slope * widest + margin;
     const auto& verts = design.mesh().vertices;
 #pragma omp parallel for schedule(static)
     for (int v = 0; v < int(verts.size()); ++v) {
       const double dev = out.design_deviation[size_t(v)];
       if (!std::isfinite(dev)) continue;
-      double depth = -INFINITY;
+      double depth = -INFINITY, reach = -INFINITY;  // by the side's spheres at the projection: within the side; clamped to it
       for (int i = 0; i < rows; ++i) {
         const Eigen::Vector3d w = verts[size_t(v)] - at[size_t(i)];
         const double L2 = along[size_t(i)].squaredNorm(), s = w.dot(along[size_t(i)]) / L2;
-        if (s < s_lo || s > 1) continue;
-        depth = std::max(depth, profile.d(s) - (w - s * along[size_t(i)]).norm());
+        const double sc = std::clamp(s, s_lo, 1.0), held = profile.d(sc) - (w - sc * along[size_t(i)]).norm();
+        reach = std::max(reach, held);
+        if (s == sc) depth = std::max(depth, held);
       }
-      if (depth > std::abs(dev) + margin) out.design_deviation[size_t(v)] = std::numeric_limits<double>::quiet_NaN();
+      const bool deeper = depth > std::abs(dev) + margin;
+      const bool unreached = dev < 0 && reach < 0.5 * -dev - slack;
+      if (deeper || unreached) out.design_deviation[size_t(v)] = std::numeric_limits<double>::quiet_NaN();
     }
   }
   if (end) sweep_end(design, rails, *end, o.grid_t, out);

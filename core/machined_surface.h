@@ -27,8 +27,9 @@ struct MachinedSurface {
   std::vector<double> omega_deviation;    // per Ω vertex: signed distance to Φ along Φ's tool-side
                                           // normal (undercut > 0, overcut < 0); NaN beyond Φ
   std::vector<double> design_deviation;   // per Φ vertex: its distance to Ω, signed as above; NaN where Ω does
-                                          // not cover the vertex, its nearest Ω point is on a fold, or
-                                          // the cutter at some pose holds it deeper than that says
+                                          // not cover the vertex, its nearest Ω point is on a fold,
+                                          // the cutter at some pose holds it deeper than that says, or
+                                          // it claims an overcut the cutter's side does not reach
   std::vector<int> design_row;            // per Φ vertex: the Ω grid row (t index) of its closest point; -1: none
   std::vector<char> design_by_end;        // per Φ vertex: 1 where the tool's end, not its side, machines it
 };

@@ -182,12 +182,60 @@ TEST_CASE("an envelope standing across Φ machines only where it passes: the dis
       ++on_line;
       CHECK(within);
     } else if (std::abs(y) >= r && std::isfinite(dev)) {
-      // Outside the swept slot: its distance to the crossing plane, not 0.
+      // Outside the swept slot: its distance to the crossing plane, not 0, and no overcut (the
+      // vertices whose sign, Ω's offset having nothing along Φ's normal, came out as one are left
+      // unjudged: the cutter does not reach them).
       ++reached_aside;
-      CHECK(std::abs(dev) == doctest::Approx(std::abs(y - side * r)).epsilon(1e-6));
+      CHECK(dev == doctest::Approx(std::abs(y - side * r)).epsilon(1e-6));
     }
   }
   CHECK(on_line == 21);
-  CHECK(reached_aside > 300);
+  CHECK(reached_aside > 200);
   CHECK(counted == on_line);
+}
+
+TEST_CASE("a sheet of Φ turned away from the tool is not overcut by an envelope across it: the cutter does not reach it") {
+  // A Ø6 cylinder lying along y (axis at z = 3, y from -8 to 8) travels 10 mm along x: Ω is the plane
+  // z = 0. Φ has three sheets under it: the flank it cuts (z = 0, x 2-5), a strip standing 0.5 mm
+  // proud (z = 0.5, x 6-8: the cutter takes 0.5 mm off it) and, 1 mm below both, a sheet facing down
+  // (as a blade's flank turned round its edge). Ω lies 1 mm across that sheet on its material side,
+  // but the cutter stays 1 mm off it: no overcut there, while the proud strip's 0.5 mm is one.
+  const double r = 3;
+  const int samples = 50;
+  Eigen::MatrixXd A(samples, 3), B(samples, 3);
+  const std::vector<double> ts = uniform_parameters(samples);
+  for (int i = 0; i < samples; ++i) {
+    A.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], -8, r);
+    B.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], 8, r);
+  }
+  const Rails rails{fit_bspline(A, ts, 8), fit_bspline(B, ts, 8), 16};
+  ToolRadius tool;
+  tool.shape = ToolShape::Cylinder;
+  tool.D = {r};
+  const auto sheet = [](double x0, double x1, double z, double y_dir) {
+    return test::grid_mesh(11, 25, [=](int i, int j) { return Eigen::Vector3d(x0 + (x1 - x0) * i / 10, y_dir * (-6 + 0.5 * j), z); });
+  };
+  const TriMesh phi_mesh = test::merged(test::merged(sheet(2, 5, 0, 1), sheet(6, 8, 0.5, 1)), sheet(2, 8, -1, -1));
+  const SurfaceIndex phi(phi_mesh);
+  const MachinedSurface ms = machined_surface(phi, rails, tool);
+  REQUIRE(ms.tool_side == 1);
+  int flank = 0, proud = 0, below = 0, below_overcut = 0;
+  for (size_t v = 0; v < phi_mesh.vertices.size(); ++v) {
+    const double z = phi_mesh.vertices[v].z(), dev = ms.design_deviation[v];
+    if (z == 0) {
+      ++flank;
+      CHECK(std::abs(dev) < 1e-3);
+    } else if (z > 0) {
+      ++proud;
+      CHECK(dev == doctest::Approx(-0.5).epsilon(1e-3));
+    } else {
+      ++below;
+      CHECK(phi.normals()[v].z() < -0.99);
+      below_overcut += std::isfinite(dev) && dev < 0;
+    }
+  }
+  CHECK(flank == 275);
+  CHECK(proud == 275);
+  CHECK(below == 275);
+  CHECK(below_overcut == 0);
 }
