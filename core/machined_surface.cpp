@@ -159,8 +159,8 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
   // end's side); such vertices are left uncovered by this patch.
   // And the converse: Ω's nearest point can lie across Φ from a vertex the cutter never reaches (a
   // sheet of Φ turned away from the tool, as where a blade's flank wraps round its leading edge):
-  // a vertex the side holds at most half as deep as Ω's overcut claims, less the tool's travel
-  // between rows, is not overcut by it (rotor 37: 0.67-1.15 mm "overcuts" of leading-edge vertices
+  // a vertex the side's spheres hold less than half as deep as Ω's overcut claims, less the tool's
+  // travel between rows and what the sphere at the projection can miss (slack), is not overcut by it (rotor 37: 0.67-1.15 mm "overcuts" of leading-edge vertices
   // the cutter stays 0.1 mm off). A real overcut D is at least D deep in a convex cutter's side at
   // the pose whose characteristic passes nearest, at most a row's travel from a row.
   {
