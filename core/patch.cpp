@@ -1,7 +1,8 @@
 #include "core/patch.h"
 
-#include <algorithm>
+#include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <tuple>

@@ -9,6 +9,7 @@
 
 #include "core/errors.h"
 #include "pipeline/output_dir.h"
+#include "postproc/verify.h"
 
 namespace flankcam::pipeline {
 
