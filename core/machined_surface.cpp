@@ -195,7 +195,9 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
       for (int i = 0; i < rows; ++i) {
         const Eigen::Vector3d w = verts[size_t(v)] - at[size_t(i)];
         const double L2 = along[size_t(i)].squaredNorm(), s = w.dot(along[size_t(i)]) / L2;
-        const double sc = std::clamp(s, s_lo, 1.0), held = profile.d(sc) - (w - sc * along[size_t(i)]).norm();
+        const double sc = std::clamp(s, s_lo, 1.0);
+        if (s != sc && !(dev < 0)) continue;  // beyond the side: only an overcut claim needs its reach
+        const double held = profile.d(sc) - (w - sc * along[size_t(i)]).norm();
         reach = std::max(reach, held);
         if (s == sc) depth = std::max(depth, held);
       }
