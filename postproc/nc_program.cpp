@@ -138,7 +138,7 @@ VerifyOptions back_simulation_options(const PostOptions& o) {
   // Rapids keep the clearance the links were planned with (not merely off the part: the links of a
   // 0.5 mm clearance job came 0.483 mm close); one that does not is planned again farther out.
   vo.link_clearance_mm = o.clearance_mm;
-  if (o.apart.cut_part && o.design) vo.apart = o.apart;
+  if (o.design_apart()) vo.apart = o.apart;
   return vo;
 }
 
@@ -281,10 +281,9 @@ LeadPlanner lead_planner(int tool_number, const SurfaceIndex& part, const ToolAs
   }
   Eigen::AlignedBox3d box;
   for (const Eigen::Vector3d& v : part.mesh().vertices) box.extend(v);
-  const bool apart = configured.apart.cut_part && configured.design;
   VerifyTool tool;
   tool.number = tool_number, tool.assembly = a;
-  return {LinkJudge{part, apart ? configured.design : nullptr, std::move(tool), back_simulation_options(configured),
+  return {LinkJudge{part, configured.design_apart(), std::move(tool), back_simulation_options(configured),
                     box.center(), 0.5 * box.diagonal().norm() + max_radius(a)},
           std::move(levels)};
 }
@@ -438,9 +437,8 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
     for (const PostInput& in : inputs)
       if (std::none_of(tools.begin(), tools.end(), [&](const VerifyTool& t) { return t.number == in.cl.tool; }))
         tools.push_back({in.cl.tool, assembly_of(in), in.tool_length_mm > 0 ? in.tool_length_mm : o.path.tool_length_mm});
-    const bool apart = o.apart.cut_part && o.design;
     const VerifyReport rep = verify_text(text, o.dialect, name + file_extension(o.dialect), m, *o.part, tools,
-                                         back_simulation_options(o), apart ? o.design : nullptr);
+                                         back_simulation_options(o), o.design_apart());
     const bool links_clear = std::none_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.rapid; });
     if (links_clear || tries >= 2) {
       p.links_checked = true;

@@ -112,6 +112,8 @@ struct PostOptions {
   CutApart apart;
   const SurfaceIndex* design = nullptr;
   std::string validate() const;      // empty when valid
+  // Φ when the cut is judged apart (both apart.cut_part and design given), else null.
+  const SurfaceIndex* design_apart() const { return apart.cut_part ? design : nullptr; }
 };
 
 // One tool's CL-data and what the program needs to know about the tool.
