@@ -831,7 +831,7 @@ Eigen::Matrix3d extent_axes(const TriMesh& m) {
 Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& options,
                          const std::function<void(const CoverProgress&)>& on_progress) {
   if (auto err = options.validate(); !err.empty()) throw InputError(err);
-  // The options of the search; a shared tool is held in them once the first patch has fitted it.
+  // The options of the search; a shared tool is held in them once the first two patches have chosen it.
   CoverOptions o = options;
   const bool sharing = o.shared_tool && !o.patch.fit.fixed_tool;  // a fixed tool is one tool already
   const TriMesh& m = surface.mesh();
@@ -1176,12 +1176,43 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     for (Fitted& f : pool) f.gain = gain_of(f.fit, covered, area, tol);
     std::stable_sort(pool.begin(), pool.end(), [](const Fitted& x, const Fitted& y) { return x.gain > y.gain; });
     while (!pool.empty() && (int(pool.size()) > o.spares || pool.back().gain < 0.005)) pool.pop_back();
-    if (sharing && chosen.size() == 1) {
-      // The shared tool: the first patch's, turned to stand with its holder end along `up` (with a
-      // check surface the part has chosen that end already). Held from now on; the seeds are placed
-      // at its radii; the other first-round fits are refitted with it.
-      PatchFit& first = chosen.front().fit;
-      if (o.up && !o.patch.fit.check.part && mean_axis(first.fit.rails).dot(*o.up) < 0) first = reversed(std::move(first));
+    if (sharing && !o.patch.fit.fixed_tool && chosen.size() == 2) {
+      // The shared tool: each of the first two patches' own tools (turned to stand with its holder
+      // end along `up`; with a check surface the part has chosen that end already) is held for the
+      // other patch, refitted from its motion; the pair that covers more is kept and its tool held
+      // from now on: the seeds are placed at its radii, the spares refitted with it. The first patch
+      // alone is fitted to its own stretch of Φ: a tool that machines it within tolerance need not
+      // be the one that machines the rest (two flanks of one barrel tool: the first patch's tool held
+      // covered 91% of both in 3 patches, the second's 95% in 2).
+      std::vector<char> none(nv, 0);
+      double pick_coverage = -1;
+      std::vector<Chosen> pick;
+      for (size_t i = 0; i < 2; ++i) {
+        Chosen own = chosen[i];
+        if (o.up && !o.patch.fit.check.part && mean_axis(own.fit.fit.rails).dot(*o.up) < 0) own.fit = reversed(std::move(own.fit));
+        CoverOptions held = o;
+        held.patch.fit.fixed_tool = own.fit.fit.tool;
+        held.tool_length = own.fit.fit.rails.length;
+        std::vector<char> by_own(nv, 0);
+        for (size_t v = 0; v < nv; ++v) {
+          const double d = own.fit.machined.design_deviation[v];
+          by_own[v] = std::isfinite(d) && std::abs(d) <= tol;
+        }
+        own.gain = gain_of(own.fit, none, area, tol);
+        report("choosing the shared tool: patch " + std::to_string(i + 1) + "'s tool held for the other");
+        const Chosen& other = chosen[1 - i];
+        const Rails start = other.fit.fit.rails;
+        Fitted f = fit_candidate(surface, other.fit.trajectory.value_or(LineTrajectory{}), by_own, area, held, &start);
+        ++out.seeds_tried;
+        std::vector<Chosen> pair{own};
+        if (f.ok && f.gain >= 0.005) pair.push_back(Chosen{std::move(f.fit), f.gain, false, other.from_region});
+        const double c = own.gain + (pair.size() > 1 ? pair[1].gain : 0);
+        if (c > pick_coverage + 1e-9) pick_coverage = c, pick = std::move(pair);
+      }
+      chosen = std::move(pick);
+      update_union();
+      report("shared tool chosen");
+      const PatchFit& first = chosen.front().fit;
       o.patch.fit.fixed_tool = first.fit.tool;
       o.tool_length = first.fit.rails.length;
       o.radii.clear();
@@ -1189,6 +1220,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       std::sort(o.radii.begin(), o.radii.end());
       o.radii.erase(std::unique(o.radii.begin(), o.radii.end(), [](double x, double y) { return std::abs(x - y) < 1e-3; }),
                     o.radii.end());
+      for (Fitted& f : pool) f.gain = gain_of(f.fit, covered, area, tol);
       restarts = std::move(pool);
       pool.clear();
     }

@@ -45,7 +45,7 @@ struct CoverOptions {
   // At max_patches short of the target: up to this many exchange rounds. The patch that brings the
   // least no other patch covers is set aside (a spare) and one more round searched from what is then
   // uncovered; the round's best patch takes the place when it brings more, else the set-aside patch
-  // returns and the next weakest is tried. Not with a shared tool (the first patch holds it).
+  // returns and the next weakest is tried. Not with a shared tool (the held tool is chosen by the first two patches).
   int exchanges = 3;
   // Uncovered regions (edge-connected, at least `region_min` of Φ's area, the largest `regions` of
   // them) that a round's best patch brings less than `region_below` of: searched as a surface of their
@@ -64,14 +64,15 @@ struct CoverOptions {
   // Tool policy (issue 14). Default: one custom tool per patch, fitted with it.
   // patch.fit.fixed_tool set (a catalogue tool): every candidate's motion is fitted to that tool,
   // whose axis is `tool_length` long (motion only, the paper's fit without d as unknowns).
-  // shared_tool: one custom tool for every patch (one tool to grind, one tool change): the first
-  // patch is fitted as usual and its tool is then held for every later candidate (motion only), so
+  // shared_tool: one custom tool for every patch (one tool to grind, one tool change): the first two
+  // patches are fitted as usual, each one's tool is held for the other (its motion refitted), and
+  // the tool of the pair that covers more is then held for every later candidate (motion only), so
   // every patch is one that tool can cut; at the end all patches are refitted jointly
   // (fit_shared_tool from their motions), kept when the union's coverage does not drop.
   bool shared_tool = false;
   double tool_length = 0;  // unit frame; with patch.fit.fixed_tool
   // With a held tool (fixed or shared) its ends are not interchangeable: candidates start with the
-  // b end (holder) along `up` (the machine's spindle side), and the first shared patch is turned so.
+  // b end (holder) along `up` (the machine's spindle side), and the patch whose tool is shared is turned so.
   // Unset: the start whose initial error is lower. A check surface's own up takes precedence.
   std::optional<Eigen::Vector3d> up;
   std::string validate() const;  // empty when valid, else names the field
@@ -105,7 +106,8 @@ struct Detection {
   int regions_searched = 0;             // uncovered regions searched as surfaces of their own (CoverOptions::regions)
   int from_regions = 0;                 // patches (of the final set) that such a search found
   // shared_tool: every patch has the same tool (same radii, tip at the a end). The union's coverage
-  // with the first patch's tool held, and whether the joint refit replaced it (coverage not lower).
+  // with the held tool (of the first two patches' own tools, the one that covers more of both when
+  // held for the other), and whether the joint refit replaced it (coverage not lower).
   bool shared_tool = false;
   double coverage_held_tool = 0;
   bool joint_refit = false;

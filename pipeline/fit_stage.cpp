@@ -451,7 +451,7 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   c.coverage_held_tool = d.coverage_held_tool;
   c.joint_refit = d.joint_refit;
   if (job.tool.shared && !job.tool.catalogue && d.patches.size() > 1)
-    progress(fmt::format("shared tool: {:.1f}% with the first patch's tool held, joint refit of all patches {}",
+    progress(fmt::format("shared tool: {:.1f}% with the held tool (the better of the first two patches' own), joint refit of all patches {}",
                          100 * d.coverage_held_tool, d.joint_refit ? "kept" : "not kept (it covered less)"));
   out.cover = std::move(c);
   progress(cover_summary(job, out));
@@ -977,9 +977,10 @@ nlohmann::ordered_json tool_policy_report(const Job& job, const CoverResult& c) 
     return {{"policy", "catalogue"}, {"name", job.tool.catalogue->name}, {"tools", 1},
             {"note", "the catalogue tool held for every detected patch, only the motions fitted"}};
   if (!job.tool.shared) return {{"policy", "per patch"}, {"note", "one custom tool fitted with each patch"}};
-  return {{"policy", "shared"}, {"tools", 1}, {"coverage_first_tool_held", c.coverage_held_tool},
+  return {{"policy", "shared"}, {"tools", 1}, {"coverage_tool_held", c.coverage_held_tool},
           {"joint_refit_kept", c.joint_refit},
-          {"note", "one custom tool for every patch: the first patch's tool held while the others were detected, then all "
+          {"note", "one custom tool for every patch: of the first two patches' own tools, the one that covers more when "
+                   "held for the other, held while the others were detected, then all "
                    "patches refitted jointly with one tool (kept when the union's coverage did not drop)"}};
 }
 }  // namespace

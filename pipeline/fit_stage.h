@@ -66,7 +66,7 @@ struct CoverResult {
   int regions_searched = 0;           // uncovered regions searched on their own (cover.regions)
   int from_regions = 0;               // patches kept that such a search found
   // tool: {shared: true} (or a catalogue tool): one tool for every patch. Shared: the coverage with
-  // the first patch's tool held for the others, and whether the joint refit of all patches was kept.
+  // the held tool (core/detect.h), and whether the joint refit of all patches was kept.
   bool one_tool = false;
   double coverage_held_tool = 0;
   bool joint_refit = false;

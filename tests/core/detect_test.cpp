@@ -393,18 +393,17 @@ TwoFlanks two_flanks(const char* first, const char* second, int n_s, int n_t) {
   return out;
 }
 
-// The one tool of a shared-tool detection, and both flanks machined. The first patch's tool, held
-// for the second flank, is fitted to the arc's flank alone and is not the barrel that made both: it
-// machines 91.3% of the two within 1e-4 (a second patch on the s-curve's flank, a third between),
-// and no further candidate with it brings more (NoProgress), nor does the joint refit. Before the
-// machined surface stopped counting Ω's overcut claims on the other flank, which faces away and which
-// the cutter stays clear of, those claims trimmed the first motion and another tool was held (95.2%).
+// The one tool of a shared-tool detection, and both flanks machined. Each of the first two patches'
+// own tools is held for the other; the pair that covers more keeps its tool: 97.9% of the two flanks
+// within 1e-4 in 3 patches with it, 98.0% after the joint refit (kept). Holding the first patch's tool,
+// fitted to the arc's flank alone, gave 91.3% (100% of that flank, 85.1% of the s-curve's), and
+// 145 s of fruitless rounds and region searches with it against 35 s now.
 void check_one_tool_two_flanks(const Detection& d, const TwoFlanks& tf) {
   REQUIRE(!d.patches.empty());
   CHECK(d.shared_tool);
   CHECK(d.patches.size() <= 3);
-  CHECK((d.stop == CoverStop::Coverage || d.stop == CoverStop::NoProgress));
-  CHECK(d.coverage >= 0.9);
+  CHECK(d.stop == CoverStop::Coverage);
+  CHECK(d.coverage >= 0.95);
   CHECK(worst_overcut(d) <= 1e-4);
   // One tool: the same radii and axis length for every patch, tip at the a end of each.
   const FitResult& first = d.patches[0].fit.fit;
@@ -412,8 +411,8 @@ void check_one_tool_two_flanks(const Detection& d, const TwoFlanks& tf) {
     CHECK(p.fit.fit.tool.D == first.tool.D);
     CHECK(p.fit.fit.rails.length == doctest::Approx(first.rails.length).epsilon(1e-9));
   }
-  // Both flanks are machined: at least 95% of the first flank's vertices lie within tolerance and 80%
-  // of the second's (measured: 100% and 85.1%).
+  // Both flanks are machined: at least 95% of the first flank's vertices lie within tolerance and 90%
+  // of the second's (measured: 100% and 95.1%).
   int within[2] = {0, 0}, total[2] = {0, 0};
   for (size_t v = 0; v < d.deviation.size(); ++v) {
     const int k = int(v) < tf.first_vertices ? 0 : 1;
@@ -422,13 +421,14 @@ void check_one_tool_two_flanks(const Detection& d, const TwoFlanks& tf) {
   }
   MESSAGE("flanks within 1e-4: ", within[0], " of ", total[0], ", ", within[1], " of ", total[1]);
   CHECK(within[0] >= 0.95 * total[0]);
-  CHECK(within[1] >= 0.8 * total[1]);
+  CHECK(within[1] >= 0.9 * total[1]);
 }
 }  // namespace
 
 TEST_CASE("tool shared: two separate flanks of one barrel tool are covered by one tool in few patches" * doctest::test_suite("heavy")) {
-  // The arc's flank and the s-curve's, 25 mm apart. The first patch's custom tool is held for every
-  // later candidate (motion only); the joint refit at the end is kept only if it covers as much.
+  // The arc's flank and the s-curve's, 25 mm apart. The first two patches fit their own tools; the
+  // one that covers more of both when held for the other is held for every later candidate (motion
+  // only); the joint refit at the end is kept only if it covers as much.
   const TwoFlanks tf = two_flanks("arc", "s-curve", 40, 120);
   const SurfaceIndex surface(tf.unit_mesh);
   CoverOptions o;
@@ -436,12 +436,14 @@ TEST_CASE("tool shared: two separate flanks of one barrel tool are covered by on
   o.shared_tool = true;
   std::vector<std::string> stages;
   const Detection d = detect_patches(surface, o, [&](const CoverProgress& p) { stages.push_back(p.stage); });
-  MESSAGE("shared tool: " << d.patches.size() << " patches, coverage " << d.coverage << " (first tool held: "
+  MESSAGE("shared tool: " << d.patches.size() << " patches, coverage " << d.coverage << " (tool held: "
                           << d.coverage_held_tool << ", joint refit " << std::string(d.joint_refit ? "kept" : "not kept") << ")");
   check_one_tool_two_flanks(d, tf);
   CHECK(d.coverage >= d.coverage_held_tool);
-  if (d.patches.size() > 1)
+  if (d.patches.size() > 1) {
+    CHECK(std::find(stages.begin(), stages.end(), "shared tool chosen") != stages.end());
     CHECK(std::find(stages.begin(), stages.end(), "refitting all patches jointly with one tool") != stages.end());
+  }
 }
 
 TEST_CASE("with a part: a post standing in front of a flank splits the cover, both sides are cut and no tool enters the post" * doctest::test_suite("heavy")) {
