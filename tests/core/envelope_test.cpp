@@ -239,3 +239,58 @@ TEST_CASE("a sheet of Φ turned away from the tool is not overcut by an envelope
   CHECK(below == 275);
   CHECK(below_overcut == 0);
 }
+
+TEST_CASE("a strongly tapered cutter does not overcut a sheet of Φ turned away from it either") {
+  // The test above with a cone: radius d 1 at y = -8 to 7 at y = 8 (d' = 0.375; d is the radius of
+  // the spheres the tool envelopes, as in the paper), axis at z = 8 along y, travelling 10 mm along x:
+  // Ω is the plane below tangent to those spheres, z = 8 - k d(y), k = 1 / sqrt(1 - d'^2). The flank
+  // on Ω (y -6..4: Ω's generators touch the spheres short of the axis' far end, at y 5.2), a strip
+  // 0.5 mm proud of it, and 0.5 mm below both a sheet facing down. The unreached rule's slack had
+  // allowed d'^2 times the largest radius (1 mm here) for the sphere at a vertex's projection: every
+  // vertex of the sheet below was called overcut by ~0.46 mm (rotor 37: a cutter tapering from Ø0.8 to Ø8.8 mm claimed a 0.209 mm
+  // overcut where it stays 0.006 mm off).
+  const double slope = 0.375, k = 1 / std::sqrt(1 - slope * slope);
+  const auto radius = [&](double y) { return 1 + slope * (y + 8); };
+  const auto plane = [&](double y) { return 8 - k * radius(y); };
+  const int samples = 50;
+  Eigen::MatrixXd A(samples, 3), B(samples, 3);
+  const std::vector<double> ts = uniform_parameters(samples);
+  for (int i = 0; i < samples; ++i) {
+    A.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], -8, 8);
+    B.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], 8, 8);
+  }
+  const Rails rails{fit_bspline(A, ts, 8), fit_bspline(B, ts, 8), 16};
+  ToolRadius tool;
+  tool.shape = ToolShape::Cone;
+  tool.D = {radius(-8), radius(8)};
+  const auto sheet = [&](double x0, double x1, double dz, double y_dir) {
+    return test::grid_mesh(11, 21, [&, x0, x1, dz, y_dir](int i, int j) {
+      const double y = -1 + y_dir * 0.5 * (j - 10);
+      return Eigen::Vector3d(x0 + (x1 - x0) * i / 10, y, plane(y) + dz);
+    });
+  };
+  const TriMesh phi_mesh = test::merged(test::merged(sheet(2, 5, 0, 1), sheet(6, 8, 0.5, 1)), sheet(2, 8, -0.5, -1));
+  const SurfaceIndex phi(phi_mesh);
+  const MachinedSurface ms = machined_surface(phi, rails, tool);
+  REQUIRE(ms.tool_side == 1);
+  const double across = 1 / std::hypot(1.0, k * slope);  // a height difference dz is dz·across along the plane's normal
+  int flank = 0, proud = 0, below = 0, below_overcut = 0;
+  for (size_t v = 0; v < phi_mesh.vertices.size(); ++v) {
+    const Eigen::Vector3d& x = phi_mesh.vertices[v];
+    const double dz = x.z() - plane(x.y()), dev = ms.design_deviation[v];
+    if (std::abs(dz) < 1e-9) {
+      ++flank;
+      CHECK(std::abs(dev) < 1e-3);
+    } else if (dz > 0) {
+      ++proud;
+      CHECK(dev == doctest::Approx(-0.5 * across).epsilon(1e-2));
+    } else {
+      ++below;
+      below_overcut += std::isfinite(dev) && dev < 0;
+    }
+  }
+  CHECK(flank == 231);
+  CHECK(proud == 231);
+  CHECK(below == 231);
+  CHECK(below_overcut == 0);
+}
