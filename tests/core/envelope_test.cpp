@@ -240,6 +240,52 @@ TEST_CASE("a sheet of Φ turned away from the tool is not overcut by an envelope
   CHECK(below_overcut == 0);
 }
 
+TEST_CASE("an overcut claim Ω's coarse rows cannot decide is judged at denser rows") {
+  // A Ø6 cylinder along y (axis at z = 3) travelling 100 mm along x, Ω tessellated at 5 rows (25 mm
+  // apart: the rows' travel allows for 25 mm). Under Ω: the flank (z = 0), a strip 0.5 mm proud
+  // (a real overcut) and, 3 mm below, a sheet facing down that the cutter stays 3 mm off. At Ω's
+  // rows alone no claim under 50 mm could be dropped; at 65 rows (1.6 mm apart) the sheet's is.
+  const double r = 3;
+  const int samples = 50;
+  Eigen::MatrixXd A(samples, 3), B(samples, 3);
+  const std::vector<double> ts = uniform_parameters(samples);
+  for (int i = 0; i < samples; ++i) {
+    A.row(i) = Eigen::RowVector3d(100 * ts[size_t(i)], -8, r);
+    B.row(i) = Eigen::RowVector3d(100 * ts[size_t(i)], 8, r);
+  }
+  const Rails rails{fit_bspline(A, ts, 8), fit_bspline(B, ts, 8), 16};
+  ToolRadius tool;
+  tool.shape = ToolShape::Cylinder;
+  tool.D = {r};
+  const auto sheet = [](double x0, double x1, double z, double y_dir) {
+    return test::grid_mesh(11, 25, [=](int i, int j) { return Eigen::Vector3d(x0 + (x1 - x0) * i / 10, y_dir * (-6 + 0.5 * j), z); });
+  };
+  const TriMesh phi_mesh = test::merged(test::merged(sheet(20, 50, 0, 1), sheet(60, 80, 0.5, 1)), sheet(20, 80, -3, -1));
+  const SurfaceIndex phi(phi_mesh);
+  MachinedSurfaceOptions mo;
+  mo.grid_t = 5;
+  const MachinedSurface ms = machined_surface(phi, rails, tool, mo);
+  REQUIRE(ms.tool_side == 1);
+  int flank = 0, proud = 0, below = 0, below_overcut = 0;
+  for (size_t v = 0; v < phi_mesh.vertices.size(); ++v) {
+    const double z = phi_mesh.vertices[v].z(), dev = ms.design_deviation[v];
+    if (z == 0) {
+      ++flank;
+      CHECK(std::abs(dev) < 1e-3);
+    } else if (z > 0) {
+      ++proud;
+      CHECK(dev == doctest::Approx(-0.5).epsilon(1e-3));
+    } else {
+      ++below;
+      below_overcut += std::isfinite(dev) && dev < 0;
+    }
+  }
+  CHECK(flank == 275);
+  CHECK(proud == 275);
+  CHECK(below == 275);
+  CHECK(below_overcut == 0);
+}
+
 TEST_CASE("a strongly tapered cutter does not overcut a sheet of Φ turned away from it either") {
   // The test above with a cone: radius d 1 at y = -8 to 7 at y = 8 (d' = 0.375; d is the radius of
   // the spheres the tool envelopes, as in the paper), axis at z = 8 along y, travelling 10 mm along x:
