@@ -2,6 +2,8 @@
 
 #include <doctest/doctest.h>
 
+#include <functional>
+
 #include "core/bspline.h"
 #include "core/closest_point.h"
 #include "core/fitting.h"
@@ -194,149 +196,107 @@ TEST_CASE("an envelope standing across Φ machines only where it passes: the dis
   CHECK(counted == on_line);
 }
 
-TEST_CASE("a sheet of Φ turned away from the tool is not overcut by an envelope across it: the cutter does not reach it") {
-  // A Ø6 cylinder lying along y (axis at z = 3, y from -8 to 8) travels 10 mm along x: Ω is the plane
-  // z = 0. Φ has three sheets under it: the flank it cuts (z = 0, x 2-5), a strip standing 0.5 mm
-  // proud (z = 0.5, x 6-8: the cutter takes 0.5 mm off it) and, 1 mm below both, a sheet facing down
-  // (as a blade's flank turned round its edge). Ω lies 1 mm across that sheet on its material side,
-  // but the cutter stays 1 mm off it: no overcut there, while the proud strip's 0.5 mm is one.
-  const double r = 3;
+namespace {
+// A tool lying along y (its axis at height z, y from -8 to 8) travelling `travel` mm along x.
+Rails along_y_travelling_x(double z, double travel) {
   const int samples = 50;
   Eigen::MatrixXd A(samples, 3), B(samples, 3);
   const std::vector<double> ts = uniform_parameters(samples);
   for (int i = 0; i < samples; ++i) {
-    A.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], -8, r);
-    B.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], 8, r);
+    A.row(i) = Eigen::RowVector3d(travel * ts[size_t(i)], -8, z);
+    B.row(i) = Eigen::RowVector3d(travel * ts[size_t(i)], 8, z);
   }
-  const Rails rails{fit_bspline(A, ts, 8), fit_bspline(B, ts, 8), 16};
+  return {fit_bspline(A, ts, 8), fit_bspline(B, ts, 8), 16};
+}
+
+// Three sheets of Φ under a tool whose Ω is z = omega(y): the flank on Ω (x `flank`), a strip 0.5 mm
+// proud of it (x `proud`) and, `below` mm under both, a sheet facing down (as a blade's flank turned
+// round its edge). Ω lies across that sheet on its material side while the cutter stays off it. Each
+// sheet is 11 x `n` vertices, y from y0 in steps of 0.5.
+struct ThreeSheets {
+  std::function<double(double)> omega;
+  std::pair<double, double> flank, proud;
+  double below = 1;
+  double y0 = -6;
+  int n = 25;
+  TriMesh mesh() const {
+    const auto sheet = [&](std::pair<double, double> x, double dz, double y_dir) {
+      return test::grid_mesh(11, n, [&, x, dz, y_dir](int i, int j) {
+        const double y = y_dir > 0 ? y0 + 0.5 * j : y0 + 0.5 * (n - 1 - j);  // the sheet below faces down
+        return Eigen::Vector3d(x.first + (x.second - x.first) * i / 10, y, omega(y) + dz);
+      });
+    };
+    return test::merged(test::merged(sheet(flank, 0, 1), sheet(proud, 0.5, 1)), sheet({flank.first, proud.second}, -below, -1));
+  }
+  // The flank within 1e-3 of Ω, the strip overcut by `proud_depth` (0.5 mm across Ω), the sheet
+  // below not overcut. `phi` holds mesh().
+  void check(const SurfaceIndex& phi, const MachinedSurface& ms, double proud_depth) const {
+    const TriMesh& m = phi.mesh();
+    REQUIRE(ms.tool_side == 1);
+    int flanks = 0, prouds = 0, belows = 0, below_overcut = 0;
+    for (size_t v = 0; v < m.vertices.size(); ++v) {
+      const Eigen::Vector3d& x = m.vertices[v];
+      const double dz = x.z() - omega(x.y()), dev = ms.design_deviation[v];
+      if (std::abs(dz) < 1e-9) {
+        ++flanks;
+        CHECK(std::abs(dev) < 1e-3);
+      } else if (dz > 0) {
+        ++prouds;
+        CHECK(dev == doctest::Approx(-proud_depth).epsilon(1e-2));
+      } else {
+        ++belows;
+        CHECK(phi.normals()[v].z() < -0.9);  // facing down, away from the tool
+        below_overcut += std::isfinite(dev) && dev < 0;
+      }
+    }
+    CHECK(flanks == 11 * n);
+    CHECK(prouds == 11 * n);
+    CHECK(belows == 11 * n);
+    CHECK(below_overcut == 0);
+  }
+};
+}  // namespace
+
+TEST_CASE("a sheet of Φ turned away from the tool is not overcut by an envelope across it: the cutter does not reach it") {
+  // A Ø6 cylinder (axis at z = 3) travelling 10 mm: Ω is the plane z = 0. The sheet below is 1 mm
+  // under it: before session 30 all its 275 vertices were claimed overcut by 1 mm.
   ToolRadius tool;
   tool.shape = ToolShape::Cylinder;
-  tool.D = {r};
-  const auto sheet = [](double x0, double x1, double z, double y_dir) {
-    return test::grid_mesh(11, 25, [=](int i, int j) { return Eigen::Vector3d(x0 + (x1 - x0) * i / 10, y_dir * (-6 + 0.5 * j), z); });
-  };
-  const TriMesh phi_mesh = test::merged(test::merged(sheet(2, 5, 0, 1), sheet(6, 8, 0.5, 1)), sheet(2, 8, -1, -1));
-  const SurfaceIndex phi(phi_mesh);
-  const MachinedSurface ms = machined_surface(phi, rails, tool);
-  REQUIRE(ms.tool_side == 1);
-  int flank = 0, proud = 0, below = 0, below_overcut = 0;
-  for (size_t v = 0; v < phi_mesh.vertices.size(); ++v) {
-    const double z = phi_mesh.vertices[v].z(), dev = ms.design_deviation[v];
-    if (z == 0) {
-      ++flank;
-      CHECK(std::abs(dev) < 1e-3);
-    } else if (z > 0) {
-      ++proud;
-      CHECK(dev == doctest::Approx(-0.5).epsilon(1e-3));
-    } else {
-      ++below;
-      CHECK(phi.normals()[v].z() < -0.99);
-      below_overcut += std::isfinite(dev) && dev < 0;
-    }
-  }
-  CHECK(flank == 275);
-  CHECK(proud == 275);
-  CHECK(below == 275);
-  CHECK(below_overcut == 0);
+  tool.D = {3};
+  const ThreeSheets sheets{[](double) { return 0.0; }, {2, 5}, {6, 8}};
+  const SurfaceIndex phi(sheets.mesh());
+  sheets.check(phi, machined_surface(phi, along_y_travelling_x(3, 10), tool), 0.5);
 }
 
 TEST_CASE("an overcut claim Ω's coarse rows cannot decide is judged at denser rows") {
-  // A Ø6 cylinder along y (axis at z = 3) travelling 100 mm along x, Ω tessellated at 5 rows (25 mm
-  // apart: the rows' travel allows for 25 mm). Under Ω: the flank (z = 0), a strip 0.5 mm proud
-  // (a real overcut) and, 3 mm below, a sheet facing down that the cutter stays 3 mm off. At Ω's
-  // rows alone no claim under 50 mm could be dropped; at 65 rows (1.6 mm apart) the sheet's is.
-  const double r = 3;
-  const int samples = 50;
-  Eigen::MatrixXd A(samples, 3), B(samples, 3);
-  const std::vector<double> ts = uniform_parameters(samples);
-  for (int i = 0; i < samples; ++i) {
-    A.row(i) = Eigen::RowVector3d(100 * ts[size_t(i)], -8, r);
-    B.row(i) = Eigen::RowVector3d(100 * ts[size_t(i)], 8, r);
-  }
-  const Rails rails{fit_bspline(A, ts, 8), fit_bspline(B, ts, 8), 16};
+  // The Ø6 cylinder travelling 100 mm, Ω tessellated at 5 rows (25 mm apart: the rows' travel allows
+  // for 25 mm), the sheet below 3 mm under Ω. At Ω's rows alone no claim under 50 mm could be
+  // dropped; at 65 rows (1.6 mm apart) the sheet's is, the proud strip's real overcut stays.
   ToolRadius tool;
   tool.shape = ToolShape::Cylinder;
-  tool.D = {r};
-  const auto sheet = [](double x0, double x1, double z, double y_dir) {
-    return test::grid_mesh(11, 25, [=](int i, int j) { return Eigen::Vector3d(x0 + (x1 - x0) * i / 10, y_dir * (-6 + 0.5 * j), z); });
-  };
-  const TriMesh phi_mesh = test::merged(test::merged(sheet(20, 50, 0, 1), sheet(60, 80, 0.5, 1)), sheet(20, 80, -3, -1));
-  const SurfaceIndex phi(phi_mesh);
+  tool.D = {3};
+  const ThreeSheets sheets{[](double) { return 0.0; }, {20, 50}, {60, 80}, 3};
+  const SurfaceIndex phi(sheets.mesh());
   MachinedSurfaceOptions mo;
   mo.grid_t = 5;
-  const MachinedSurface ms = machined_surface(phi, rails, tool, mo);
-  REQUIRE(ms.tool_side == 1);
-  int flank = 0, proud = 0, below = 0, below_overcut = 0;
-  for (size_t v = 0; v < phi_mesh.vertices.size(); ++v) {
-    const double z = phi_mesh.vertices[v].z(), dev = ms.design_deviation[v];
-    if (z == 0) {
-      ++flank;
-      CHECK(std::abs(dev) < 1e-3);
-    } else if (z > 0) {
-      ++proud;
-      CHECK(dev == doctest::Approx(-0.5).epsilon(1e-3));
-    } else {
-      ++below;
-      below_overcut += std::isfinite(dev) && dev < 0;
-    }
-  }
-  CHECK(flank == 275);
-  CHECK(proud == 275);
-  CHECK(below == 275);
-  CHECK(below_overcut == 0);
+  sheets.check(phi, machined_surface(phi, along_y_travelling_x(3, 100), tool, mo), 0.5);
 }
 
 TEST_CASE("a strongly tapered cutter does not overcut a sheet of Φ turned away from it either") {
-  // The test above with a cone: radius d 1 at y = -8 to 7 at y = 8 (d' = 0.375; d is the radius of
-  // the spheres the tool envelopes, as in the paper), axis at z = 8 along y, travelling 10 mm along x:
-  // Ω is the plane below tangent to those spheres, z = 8 - k d(y), k = 1 / sqrt(1 - d'^2). The flank
-  // on Ω (y -6..4: Ω's generators touch the spheres short of the axis' far end, at y 5.2), a strip
-  // 0.5 mm proud of it, and 0.5 mm below both a sheet facing down. The unreached rule's slack had
-  // allowed d'^2 times the largest radius (1 mm here) for the sphere at a vertex's projection: every
-  // vertex of the sheet below was called overcut by ~0.46 mm (rotor 37: a cutter tapering from Ø0.8 to Ø8.8 mm claimed a 0.209 mm
-  // overcut where it stays 0.006 mm off).
+  // A cone: radius d 1 at y = -8 to 7 at y = 8 (d' = 0.375; d is the radius of the spheres the tool
+  // envelopes, as in the paper), axis at z = 8, travelling 10 mm: Ω is the plane below tangent to
+  // those spheres, z = 8 - k d(y), k = 1 / sqrt(1 - d'^2); its generators touch the spheres short of
+  // the axis' far end (y 5.2), so Φ spans y -6..4. The unreached rule's slack had allowed d'^2 times
+  // the largest radius (1 mm here) for the sphere at a vertex's projection: every vertex of the sheet
+  // 0.5 mm below was called overcut by ~0.46 mm (rotor 37 claimed 0.209 mm where its tapered cutter
+  // stays 0.006 mm off).
   const double slope = 0.375, k = 1 / std::sqrt(1 - slope * slope);
   const auto radius = [&](double y) { return 1 + slope * (y + 8); };
-  const auto plane = [&](double y) { return 8 - k * radius(y); };
-  const int samples = 50;
-  Eigen::MatrixXd A(samples, 3), B(samples, 3);
-  const std::vector<double> ts = uniform_parameters(samples);
-  for (int i = 0; i < samples; ++i) {
-    A.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], -8, 8);
-    B.row(i) = Eigen::RowVector3d(10 * ts[size_t(i)], 8, 8);
-  }
-  const Rails rails{fit_bspline(A, ts, 8), fit_bspline(B, ts, 8), 16};
   ToolRadius tool;
   tool.shape = ToolShape::Cone;
   tool.D = {radius(-8), radius(8)};
-  const auto sheet = [&](double x0, double x1, double dz, double y_dir) {
-    return test::grid_mesh(11, 21, [&, x0, x1, dz, y_dir](int i, int j) {
-      const double y = -1 + y_dir * 0.5 * (j - 10);
-      return Eigen::Vector3d(x0 + (x1 - x0) * i / 10, y, plane(y) + dz);
-    });
-  };
-  const TriMesh phi_mesh = test::merged(test::merged(sheet(2, 5, 0, 1), sheet(6, 8, 0.5, 1)), sheet(2, 8, -0.5, -1));
-  const SurfaceIndex phi(phi_mesh);
-  const MachinedSurface ms = machined_surface(phi, rails, tool);
-  REQUIRE(ms.tool_side == 1);
-  const double across = 1 / std::hypot(1.0, k * slope);  // a height difference dz is dz·across along the plane's normal
-  int flank = 0, proud = 0, below = 0, below_overcut = 0;
-  for (size_t v = 0; v < phi_mesh.vertices.size(); ++v) {
-    const Eigen::Vector3d& x = phi_mesh.vertices[v];
-    const double dz = x.z() - plane(x.y()), dev = ms.design_deviation[v];
-    if (std::abs(dz) < 1e-9) {
-      ++flank;
-      CHECK(std::abs(dev) < 1e-3);
-    } else if (dz > 0) {
-      ++proud;
-      CHECK(dev == doctest::Approx(-0.5 * across).epsilon(1e-2));
-    } else {
-      ++below;
-      below_overcut += std::isfinite(dev) && dev < 0;
-    }
-  }
-  CHECK(flank == 231);
-  CHECK(proud == 231);
-  CHECK(below == 231);
-  CHECK(below_overcut == 0);
+  const ThreeSheets sheets{[&](double y) { return 8 - k * radius(y); }, {2, 5}, {6, 8}, 0.5, -6, 21};
+  const SurfaceIndex phi(sheets.mesh());
+  // A height difference dz lies dz / sqrt(1 + (k d')^2) across the plane.
+  sheets.check(phi, machined_surface(phi, along_y_travelling_x(8, 10), tool), 0.5 / std::hypot(1.0, k * slope));
 }
