@@ -1183,7 +1183,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       // from now on: the seeds are placed at its radii, the spares refitted with it. The first patch
       // alone is fitted to its own stretch of Φ: a tool that machines it within tolerance need not
       // be the one that machines the rest (two flanks of one barrel tool: the first patch's tool held
-      // covered 91% of both in 3 patches, the second's 95% in 2).
+      // covered 91.3% of both in 3 patches, the second's 97.9% in 3).
       std::vector<char> none(nv, 0);
       double pick_coverage = -1;
       std::vector<Chosen> pick;

@@ -195,8 +195,7 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
     const int rows = o.grid_t;
     const std::vector<Eigen::Vector3d>& at = coarse.at;
     const std::vector<Eigen::Vector3d>& along = coarse.along;
-    const double travel = coarse.travel;
-    const double slack = travel + margin;
+    const double slack = coarse.travel + margin;
     // The side's radius across the axis at s: d(s) is the radius of the spheres it envelopes, whose
     // circles of contact lie off the perpendicular by the taper, so the section is d / sqrt(1 - d'^2)
     // (exact for a cone, to second order otherwise). With d(s) itself a vertex on the envelope of a
