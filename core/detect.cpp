@@ -869,15 +869,19 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     for (size_t v = 0; v < nv; ++v) covered[v] = std::isfinite(out.deviation[v]) && std::abs(out.deviation[v]) <= tol;
   };
   update_union();
+  // Marks in `into` the vertices a fit brings within tolerance.
+  const auto mark_covered = [&](const PatchFit& f, std::vector<char>& into) {
+    for (size_t v = 0; v < nv; ++v) {
+      const double d = f.machined.design_deviation[v];
+      into[v] |= std::isfinite(d) && std::abs(d) <= tol;
+    }
+  };
   // What each patch brings first, in the order they were found (after patches were exchanged or refitted).
   const auto recount_gains = [&]() {
     std::fill(covered.begin(), covered.end(), 0);
     for (Chosen& c : chosen) {
       c.gain = gain_of(c.fit, covered, area, tol);
-      for (size_t v = 0; v < nv; ++v) {
-        const double d = c.fit.machined.design_deviation[v];
-        covered[v] |= std::isfinite(d) && std::abs(d) <= tol;
-      }
+      mark_covered(c.fit, covered);
     }
   };
   out.stop = CoverStop::NoProgress;
@@ -1194,10 +1198,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         held.patch.fit.fixed_tool = own.fit.fit.tool;
         held.tool_length = own.fit.fit.rails.length;
         std::vector<char> by_own(nv, 0);
-        for (size_t v = 0; v < nv; ++v) {
-          const double d = own.fit.machined.design_deviation[v];
-          by_own[v] = std::isfinite(d) && std::abs(d) <= tol;
-        }
+        mark_covered(own.fit, by_own);
         own.gain = gain_of(own.fit, none, area, tol);
         report("choosing the shared tool: patch " + std::to_string(i + 1) + "'s tool held for the other");
         const Chosen& other = chosen[1 - i];

@@ -159,7 +159,7 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
   // end's side); such vertices are left uncovered by this patch.
   // And the converse: Ω's nearest point can lie across Φ from a vertex the cutter never reaches (a
   // sheet of Φ turned away from the tool, as where a blade's flank wraps round its leading edge):
-  // a vertex the side's spheres hold less than half as deep as Ω's overcut claims, less the tool's
+  // a vertex the side's sections hold less than half as deep as Ω's overcut claims, less the tool's
   // travel between rows (slack), is not overcut by it (rotor 37: 0.67-1.15 mm "overcuts" of
   // leading-edge vertices the cutter stays 0.1 mm off). A real overcut D is at least D deep in a
   // convex cutter's side at the pose whose characteristic passes nearest, at most a row's travel
@@ -191,40 +191,45 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
       }
       return r;
     };
-    const Rows coarse = rows_of(o.grid_t);
-    const int rows = o.grid_t;
-    const std::vector<Eigen::Vector3d>& at = coarse.at;
-    const std::vector<Eigen::Vector3d>& along = coarse.along;
-    const double slack = coarse.travel + margin;
-    // The side's radius across the axis at s: d(s) is the radius of the spheres it envelopes, whose
-    // circles of contact lie off the perpendicular by the taper, so the section is d / sqrt(1 - d'^2)
-    // (exact for a cone, to second order otherwise). With d(s) itself a vertex on the envelope of a
-    // tapered side seems outside it by d (1 / cos - 1); an allowance of slope² times the largest
-    // radius for that had kept every claim under two radii for a tool tapering 0.375 (test).
-    const auto section = [&](double s) {
+    // The side's radius across the axis at s, given d(s): d is the radius of the spheres it envelopes,
+    // whose circles of contact lie off the perpendicular by the taper, so the section is
+    // d / sqrt(1 - d'^2) (exact for a cone, to second order otherwise). With d(s) itself a vertex on
+    // the envelope of a tapered side seems outside it by d (1 / cos - 1); an allowance of slope² times
+    // the largest radius for that had kept every claim under two radii for a tool tapering 0.375 (test).
+    const auto section = [&](double s, double d) {
       const double slope = profile.d_s(s) / rails.length;
-      return profile.d(s) / std::sqrt(std::max(1e-6, 1 - slope * slope));
+      return d / std::sqrt(std::max(1e-6, 1 - slope * slope));
     };
+    // A vertex x against the rows r: depth, by the spheres at its projection within the side; reach
+    // (only for an overcut claim), by the sections there, the projection clamped to the side.
+    struct Held {
+      double depth = -INFINITY, reach = -INFINITY;
+    };
+    const auto held = [&](const Rows& r, const Eigen::Vector3d& x, bool claim) {
+      Held h;
+      for (size_t i = 0; i < r.at.size(); ++i) {
+        const Eigen::Vector3d w = x - r.at[i];
+        const double s = w.dot(r.along[i]) / r.along[i].squaredNorm(), sc = std::clamp(s, s_lo, 1.0);
+        if (s != sc && !claim) continue;  // beyond the side: only an overcut claim needs its reach
+        const double off = (w - sc * r.along[i]).norm(), d = profile.d(sc);
+        if (claim) h.reach = std::max(h.reach, section(sc, d) - off);
+        if (s == sc) h.depth = std::max(h.depth, d - off);
+      }
+      return h;
+    };
+    const Rows coarse = rows_of(o.grid_t);
+    const double slack = coarse.travel + margin;
     const auto& verts = design.mesh().vertices;
     std::vector<char> undecided(verts.size(), 0);  // overcut claims that only finer rows can decide
 #pragma omp parallel for schedule(static)
     for (int v = 0; v < int(verts.size()); ++v) {
       const double dev = out.design_deviation[size_t(v)];
       if (!std::isfinite(dev)) continue;
-      double depth = -INFINITY, reach = -INFINITY;  // by the spheres at the projection within the side; by the sections there, clamped to the side
-      for (int i = 0; i < rows; ++i) {
-        const Eigen::Vector3d w = verts[size_t(v)] - at[size_t(i)];
-        const double L2 = along[size_t(i)].squaredNorm(), s = w.dot(along[size_t(i)]) / L2;
-        const double sc = std::clamp(s, s_lo, 1.0);
-        if (s != sc && !(dev < 0)) continue;  // beyond the side: only an overcut claim needs its reach
-        const double off = (w - sc * along[size_t(i)]).norm();
-        reach = std::max(reach, section(sc) - off);
-        if (s == sc) depth = std::max(depth, profile.d(sc) - off);
-      }
-      const bool deeper = depth > std::abs(dev) + margin;
-      const bool unreached = dev < 0 && reach < 0.5 * -dev - slack;
+      const Held h = held(coarse, verts[size_t(v)], dev < 0);
+      const bool deeper = h.depth > std::abs(dev) + margin;
+      const bool unreached = dev < 0 && h.reach < 0.5 * -dev - slack;
       if (deeper || unreached) out.design_deviation[size_t(v)] = std::numeric_limits<double>::quiet_NaN();
-      else if (dev < -20 * margin && reach < 0.5 * -dev) undecided[size_t(v)] = 1;
+      else if (dev < -20 * margin && h.reach < 0.5 * -dev) undecided[size_t(v)] = 1;
     }
     std::vector<int> claims;
     for (size_t v = 0; v < verts.size(); ++v)
@@ -239,15 +244,9 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
       const Rows fine = rows_of(16 * (o.grid_t - 1) + 1);
 #pragma omp parallel for schedule(dynamic, 16)
       for (int k = 0; k < int(claims.size()); ++k) {
-        const int v = claims[size_t(k)];
-        const double dev = out.design_deviation[size_t(v)];
-        double reach = -INFINITY;
-        for (size_t i = 0; i < fine.at.size(); ++i) {
-          const Eigen::Vector3d w = verts[size_t(v)] - fine.at[i];
-          const double sc = std::clamp(w.dot(fine.along[i]) / fine.along[i].squaredNorm(), s_lo, 1.0);
-          reach = std::max(reach, section(sc) - (w - sc * fine.along[i]).norm());
-        }
-        if (reach < 0.5 * -dev - (fine.travel + margin)) out.design_deviation[size_t(v)] = std::numeric_limits<double>::quiet_NaN();
+        const size_t v = size_t(claims[size_t(k)]);
+        if (held(fine, verts[v], true).reach < 0.5 * -out.design_deviation[v] - (fine.travel + margin))
+          out.design_deviation[v] = std::numeric_limits<double>::quiet_NaN();
       }
     }
   }
