@@ -325,16 +325,18 @@ std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOp
 PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOptions& options) {
   if (!options.fit.check.part) return machine_and_trim(surface, std::move(plain), options);
   PatchOptions o = options;
-  if (o.orient_by_part)
+  // The holder end chosen by the part, and the tool turned so before it is judged: its tip at the a
+  // end, where the machined surface sweeps the tool's end (MachinedSurfaceOptions::end). Every
+  // motion below keeps that orientation.
+  if (o.orient_by_part) {
     o.fit.check.up = holder_up(plain.fit.rails, plain.fit.tool, o.fit.check, 2 * o.fit.samples_t,
                                o.fit.check.up.value_or(mean_axis(plain.fit.rails)));
-  const auto tip_at_a = [&](PatchFit f) {
-    return o.orient_by_part && mean_axis(f.fit.rails).dot(*o.fit.check.up) < 0 ? reversed(std::move(f)) : f;
-  };
+    if (mean_axis(plain.fit.rails).dot(*o.fit.check.up) < 0) plain = reversed(std::move(plain));
+  }
   // Clear along the whole motion: machine_and_trim's check (as dense as the collision check) found
   // no intrusion to trim for (check_trim is set only for one).
   PatchFit best = machine_and_trim(surface, plain, o);
-  if (!best.check_trim) return tip_at_a(std::move(best));
+  if (!best.check_trim) return best;
   // The tool shortened at its tip (a hub under the flank's lower edge): clear, it is compared with the
   // trimmed plain motion by coverage (and replaces it when that is not clear).
   if (o.on_stage) o.on_stage("shortening the tool at its tip to keep out of the part");
@@ -354,13 +356,13 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   // The tip was what entered the part (shortening it gained most), or no refit is wanted: a penalised
   // refit, which tilts the whole axis, is not tried (on the HECC impeller it never beat the shortened
   // tool, at ~10 s a patch).
-  if (shortened || !o.refit_with_check) return tip_at_a(std::move(best));
+  if (shortened || !o.refit_with_check) return best;
   if (o.on_stage) o.on_stage("refitting with the part as a check surface");
   PatchFit refit = plain;
   try {
     refit.fit = optimize_motion(surface, plain.fit.rails, o.fit);
   } catch (const InputError&) {
-    return tip_at_a(std::move(best));  // the penalties pushed the motion off Φ: no way out there
+    return best;  // the penalties pushed the motion off Φ: no way out there
   }
   refit.fit.eps_ini = plain.fit.eps_ini;
   refit.fit.iterations += plain.fit.iterations;
@@ -368,9 +370,9 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   // A refit that keeps clear by fitting Φ much worse is no way out.
   const bool a = machinable(best);
   const bool b = machinable(refit) && refit.fit.eps_opt.max <= std::max(o.tolerance, 2 * plain.fit.eps_opt.max);
-  if (a != b) return tip_at_a(b ? std::move(refit) : std::move(best));
-  if (a && refit.coverage > best.coverage) return tip_at_a(std::move(refit));
-  return tip_at_a(std::move(best));  // the better clear one, or neither clear: reported with its collisions
+  if (a != b) return b ? refit : best;
+  if (a && refit.coverage > best.coverage) return refit;
+  return best;  // the better clear one, or neither clear: reported with its collisions
 }
 
 std::pair<double, double> ungouged_range(const MachinedSurface& ms, double tolerance) {
