@@ -917,6 +917,55 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
   resolve_body(r, c, samples, out, in_slab, m);
   return out;
 }
+
+// The floor's pulls (CheckSurface::floor_reach): per row, the tip's check sample nearest the part (a
+// flat end's rim point, or the ball of a ball end); where that part point lies under the tip, the
+// tip's lowest point over the part's tangent plane there (the rim point farthest along -g: a flat
+// disk meets a plane first at one point of its rim) is pulled to floor_height above it.
+void add_floor_pulls(ceres::Problem& problem, const Rails& rails, const ToolRadius& tool, const CheckSurface& c,
+                     const std::vector<CheckSample>& samples, const std::vector<CheckDistance>& dist,
+                     const std::vector<BasisRow>& rows, std::vector<double>& A, std::vector<double>& B, double w) {
+  const int m = int(rows.size());
+  const bool body_at_b = !c.up || mean_axis(rails).dot(*c.up) >= 0;
+  std::vector<size_t> nearest(size_t(m), samples.size());
+  const auto tip_gap = [&](size_t k) { return dist[k].distance - (c.ball_tip ? samples[k].reach : 0.0); };
+  for (size_t k = 0; k < samples.size(); ++k) {
+    const CheckSample& cs = samples[k];
+    const bool tip = c.ball_tip ? cs.shift.squaredNorm() == 0 : cs.shift.squaredNorm() > 0 && (cs.s == 0 || cs.s == 1);
+    if (cs.body || cs.j >= 0 || !tip || !std::isfinite(dist[k].distance)) continue;
+    size_t& best = nearest[size_t(cs.i)];
+    if (best == samples.size() || tip_gap(k) < tip_gap(best)) best = k;
+  }
+  const double target = c.floor_height;
+  for (int i = 0; i < m; ++i) {
+    const size_t k = nearest[size_t(i)];
+    if (k == samples.size()) continue;
+    const CheckSample& cs = samples[k];
+    const double t = double(i) / (m - 1);
+    const Eigen::Vector3d a = rails.a.point(t), b = rails.b.point(t);
+    const Eigen::Vector3d up = (body_at_b ? Eigen::Vector3d(b - a) : Eigen::Vector3d(a - b)).normalized();
+    const Eigen::Vector3d& g = dist[k].g;
+    if (!(g.dot(up) > std::cos(M_PI / 4))) continue;
+    const double radius = tool.d(body_at_b ? 0.0 : 1.0);
+    Eigen::Vector3d shift = Eigen::Vector3d::Zero();  // from the axis point to the lowest point (flat end)
+    double lift = 0;                                  // the ball's radius above its lowest point
+    if (c.ball_tip) {
+      lift = cs.reach;
+    } else {
+      const Eigen::Vector3d across = g - g.dot(up) * up;
+      if (across.norm() > 1e-9) shift = -radius * across.normalized();
+    }
+    const Eigen::Vector3d p = (1 - cs.s) * a + cs.s * b + shift;
+    const double height = (p - dist[k].q).dot(g) - lift;
+    if (height > target + c.floor_reach * radius) continue;
+    const BasisRow& row = rows[size_t(i)];
+    std::vector<double*> blocks;
+    for (int q = 0; q < 4; ++q) blocks.push_back(&A[size_t(3 * (row.first + q))]);
+    for (int q = 0; q < 4; ++q) blocks.push_back(&B[size_t(3 * (row.first + q))]);
+    problem.AddResidualBlock(new fit_residuals::CheckResidual(row, cs.s, dist[k].q - shift, g, {}, target + lift, w, true),
+                             nullptr, blocks);
+  }
+}
 }  // namespace
 
 std::vector<double> cutter_clearances(const CheckSurface& c, const std::vector<Eigen::Vector3d>& points) {
@@ -1145,6 +1194,8 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
                                                                     cs.offset, w),
                                    nullptr, blocks);
         }
+        if (o.check.floor_reach > 0) add_floor_pulls(problem, rails, st.tool, o.check, samples, dist, rows, A, B,
+                                                     w_plane * std::sqrt(double(n)) * o.check.floor_weight);
       }
     }  // patches
     // Anchor of the tool radii (not in the paper): on nearly developable surfaces a shift of the axis

@@ -90,6 +90,17 @@ struct CheckSurface {
   // motion is clear, the motion is trimmed there instead).
   double band = 0.05;
   double depth_limit = 0.5;
+  // A floor under the tip (a hub below a blade's flank): per row, where the part's face nearest the
+  // tip's lowest point (the flat end's rim over that face's plane, or the ball's) faces the tool (its
+  // outward direction within 45 degrees of the axis, towards the holder) and that point stands less
+  // than floor_reach x the tip radius above it, the point is pulled to floor_height above it
+  // (two-sided, floor_weight relative to a row's plane terms). The fit's Φ samples leave the tip's
+  // height along a cylinder's axis free and a cone's nearly so: without it the tip floats wherever
+  // the rails happen to leave it and the flank's bottom rows next to the floor are not machined.
+  // 0: no pull (the fit only keeps out of the part).
+  double floor_reach = 0;
+  double floor_height = 0;  // unit frame
+  double floor_weight = 1;
 };
 
 struct FitOptions {

@@ -143,11 +143,12 @@ class HingeResidual final : public ceres::CostFunction {
 // q, outward direction g, fixed within a solve) at least R, where R = d_j - tolerance for the cutter
 // (c: d's basis at s, radius parameters as a 9th block) or a constant (c empty: shank, holder plus
 // the clearance). One-sided: r = w max(0, R - <p - q, g>), zero and flat where it holds.
+// `exactly`: two-sided, <p - q, g> pulled to R (a floor's pull on the tip, CheckSurface::floor_reach).
 class CheckResidual final : public ceres::CostFunction {
  public:
   CheckResidual(const BasisRow& row, double s, const Eigen::Vector3d& q, const Eigen::Vector3d& g, std::vector<double> c,
-                double offset, double w)
-      : row_(row), s_(s), q_(q), g_(g), c_(std::move(c)), offset_(offset), w_(w) {
+                double offset, double w, bool exactly = false)
+      : row_(row), s_(s), q_(q), g_(g), c_(std::move(c)), offset_(offset), w_(w), exactly_(exactly) {
     set_num_residuals(1);
     for (int k = 0; k < 8; ++k) mutable_parameter_block_sizes()->push_back(3);
     if (!c_.empty()) mutable_parameter_block_sizes()->push_back(int(c_.size()));
@@ -159,7 +160,7 @@ class CheckResidual final : public ceres::CostFunction {
     double R = offset_;
     for (size_t k = 0; k < c_.size(); ++k) R += c_[k] * x[8][k];
     const double v = R - (p - q_).dot(g_);
-    const bool on = v > 0;
+    const bool on = exactly_ || v > 0;
     r[0] = on ? w_ * v : 0.0;
     if (!J) return true;
     for (int k = 0; k < 8; ++k) {
@@ -178,6 +179,7 @@ class CheckResidual final : public ceres::CostFunction {
   Eigen::Vector3d q_, g_;
   std::vector<double> c_;
   double offset_, w_;
+  bool exactly_;
 };
 
 // A solve whose result cannot be used: Ceres' FAILURE or USER_FAILURE, or a cost that is not
