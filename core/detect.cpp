@@ -704,9 +704,14 @@ PatchOptions candidate_options(const CoverOptions& o) {
 }
 
 // A fitted motion machined over Φ and trimmed where it gouges; with a check surface kept out of the
-// part (with_check), rejected when no stretch keeps clear.
-PatchFit judged(const SurfaceIndex& surface, PatchFit f, const PatchOptions& po) {
-  return po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
+// part (with_check), rejected when no stretch keeps clear. Nothing when its tool cannot carry the
+// job's end (a ball wider than the tool, InputError from the machined surface): not a candidate.
+std::optional<PatchFit> judged(const SurfaceIndex& surface, PatchFit f, const PatchOptions& po) {
+  try {
+    return po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
+  } catch (const InputError&) {
+    return std::nullopt;
+  }
 }
 
 Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, const std::vector<char>& covered,
@@ -723,7 +728,9 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
     return out;  // the motion left the surface: not a patch
   }
   const FitResult fitted = out.fit.fit;  // untrimmed, its tip at the a end unless the part turned it
-  out.fit = judged(surface, std::move(out.fit), po);
+  std::optional<PatchFit> j = judged(surface, std::move(out.fit), po);
+  if (!j) return Fitted{};
+  out.fit = std::move(*j);
   if (machinable(out.fit)) out.gain = gain_of(out.fit, covered, area, po.tolerance), out.ok = true;
   out.whole_gain = out.gain;
   // Trimmed to less than 90% of its motion for gouging Φ, or gouging all along (not for the part,
@@ -754,8 +761,9 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
         } catch (const InputError&) {
           continue;  // what stays of the axis left Φ
         }
-        p = judged(surface, std::move(p), po);
-        if (!machinable(p)) continue;
+        std::optional<PatchFit> jp = judged(surface, std::move(p), po);
+        if (!jp || !machinable(*jp)) continue;
+        p = std::move(*jp);
         const double g = gain_of(p, covered, area, po.tolerance);
         if (!out.ok || g > out.gain) out.fit = std::move(p), out.gain = g, out.ok = true, out.cut = true;
       }
@@ -1139,8 +1147,9 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         const PatchFit& found = d.patches.front().fit;
         // As fitted on the region, and refitted on Φ from its motion.
         Fitted as_is;
-        as_is.fit = judged(surface, found, candidate_options(o));
-        if (machinable(as_is.fit)) as_is.ok = true, as_is.gain = as_is.whole_gain = gain_of(as_is.fit, covered, area, tol);
+        std::optional<PatchFit> j = judged(surface, found, candidate_options(o));
+        if (j) as_is.fit = std::move(*j);
+        if (j && machinable(as_is.fit)) as_is.ok = true, as_is.gain = as_is.whole_gain = gain_of(as_is.fit, covered, area, tol);
         report(name + ": refitting its patch on the whole surface");
         Fitted refit = fit_candidate(surface, found.trajectory.value_or(LineTrajectory{}), covered, area, o, &found.fit.rails);
         ++out.seeds_tried;

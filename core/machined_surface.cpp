@@ -115,8 +115,10 @@ MachinedSurface machined_surface(const SurfaceIndex& design, const Rails& rails,
       }
     }
   }
+  // Radii that describe no tool (a meridian folding back, tool_defect) have no end to sweep: such a
+  // fit is never machinable and is judged by its side alone (detection meets them among candidates).
   std::optional<EndProfile> end;
-  if (o.end) end = end_profile(meridian(tool, rails.length, 121), *o.end);
+  if (o.end && !tool_defect(tool, rails.length)) end = end_profile(meridian(tool, rails.length, 121), *o.end);
   out.omega = envelope_grid(motion, profile, o.grid_s, o.grid_t, out.sheet, 0.0, 1.0, end ? end->side_s : 0.0);
   out.tool_side = tool_side(design, rails);
   const double nan = std::numeric_limits<double>::quiet_NaN();

@@ -173,6 +173,22 @@ TEST_CASE("a flat-end cylinder with its tip face on the floor machines the flank
   CHECK(floor_min <= tol);
 }
 
+TEST_CASE("radii that describe no tool have no end to sweep: the machined surface is the side alone, not an error") {
+  // A waist that folds the meridian (as fitting_test's): its end cannot be built ("the tool's
+  // meridian must have increasing z"); detection meets such radii among its candidates and must
+  // judge them (not machinable) instead of stopping the run.
+  ToolRadius waist;
+  waist.D = {20, 15, 15, 20};
+  REQUIRE(tool_defect(waist, 20));
+  CHECK_THROWS_AS((void)end_profile(meridian(waist, 20, 121), ToolEnd{}), InputError);
+  const SurfaceIndex design(flank_on_floor(1.0));
+  MachinedSurfaceOptions o;
+  o.end = ToolEnd{};
+  const MachinedSurface m = machined_surface(design, straight_rails(), waist, o);
+  CHECK(std::count(m.design_by_end.begin(), m.design_by_end.end(), 1) == 0);
+  CHECK(m.design_deviation.size() == design.mesh().vertices.size());
+}
+
 TEST_CASE("ball and flat ends differ at the floor corner by R (sqrt 2 - 1), and a corner R leaves a fillet of radius R" * doctest::test_suite("heavy")) {
   const TriMesh mesh = flank_on_floor(0.25);
   const SurfaceIndex design(mesh);
