@@ -100,7 +100,7 @@ struct CheckSurface {
   // 0: no pull (the fit only keeps out of the part).
   double floor_reach = 0;
   double floor_height = 0;  // unit frame
-  double floor_weight = 1;
+  double floor_weight = 10;
 };
 
 struct FitOptions {
