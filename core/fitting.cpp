@@ -927,11 +927,13 @@ void add_floor_pulls(ceres::Problem& problem, const Rails& rails, const ToolRadi
                      const std::vector<BasisRow>& rows, std::vector<double>& A, std::vector<double>& B, double w) {
   const int m = int(rows.size());
   const bool body_at_b = !c.up || mean_axis(rails).dot(*c.up) >= 0;
+  const double tip_s = body_at_b ? 0.0 : 1.0;
   std::vector<size_t> nearest(size_t(m), samples.size());
   const auto tip_gap = [&](size_t k) { return dist[k].distance - (c.ball_tip ? samples[k].reach : 0.0); };
   for (size_t k = 0; k < samples.size(); ++k) {
     const CheckSample& cs = samples[k];
-    const bool tip = c.ball_tip ? cs.shift.squaredNorm() == 0 : cs.shift.squaredNorm() > 0 && (cs.s == 0 || cs.s == 1);
+    // The tip end's rim (not the holder end's), or the ball at the tip.
+    const bool tip = c.ball_tip ? cs.shift.squaredNorm() == 0 : cs.shift.squaredNorm() > 0 && cs.s == tip_s;
     if (cs.body || cs.j >= 0 || !tip || !std::isfinite(dist[k].distance)) continue;
     size_t& best = nearest[size_t(cs.i)];
     if (best == samples.size() || tip_gap(k) < tip_gap(best)) best = k;
@@ -946,7 +948,7 @@ void add_floor_pulls(ceres::Problem& problem, const Rails& rails, const ToolRadi
     const Eigen::Vector3d up = (body_at_b ? Eigen::Vector3d(b - a) : Eigen::Vector3d(a - b)).normalized();
     const Eigen::Vector3d& g = dist[k].g;
     if (!(g.dot(up) > std::cos(M_PI / 4))) continue;
-    const double radius = tool.d(body_at_b ? 0.0 : 1.0);
+    const double radius = tool.d(tip_s);
     Eigen::Vector3d shift = Eigen::Vector3d::Zero();  // from the axis point to the lowest point (flat end)
     double lift = 0;                                  // the ball's radius above its lowest point
     if (c.ball_tip) {
