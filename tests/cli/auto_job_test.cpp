@@ -21,6 +21,14 @@ std::string auto_job(const test::ScratchDir& dir, const std::string& extra) {
                    "surface: env/envelope.obj\ntool: {shape: cone}\ntolerance: 0.05\nfeed: 800\n" + extra + "patches: auto\n");
   return dir.file("job.yaml");
 }
+
+// `flankcam <command>` of dir's job.yaml into dir/out, which must succeed: its report.json.
+nlohmann::json job_report(const test::ScratchDir& dir, const std::string& command) {
+  const auto r = test::run_flankcam(command + " " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  return nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+}
 }  // namespace
 
 TEST_CASE("flankcam fit with patches: auto covers an exact envelope with one patch and writes a job that fits it again" * doctest::test_suite("heavy")) {
@@ -122,10 +130,7 @@ TEST_CASE("patches: auto on the bundled blade stands every tool tip-down in the 
                                              "holder: {shank_length: 20, shank_diameter: 8, length: 40, diameter: 25, "
                                              "diameter_far: 40}\nmachine: xyzbc-head-table\npost: {dialects: [iso]}\n"
                                              "patches: auto\n");
-  const auto r = test::run_flankcam("run " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
-  INFO(r.err);
-  REQUIRE(r.code == 0);
-  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const auto report = job_report(dir, "run");
   CHECK(double(report["cover"]["coverage"]) >= 0.95);
   REQUIRE(report["patches"].size() >= 1);
   for (const auto& patch : report["patches"]) {
@@ -172,10 +177,7 @@ TEST_CASE("patches: auto with a floor as the part: the tool's tip is brought ont
   test::write_text(dir.file("job.yaml"),
                    "surface: flank.obj\npart: floor.obj\ncheck_tolerance: 0.005\ntool: {shape: cone}\ntolerance: 0.02\n"
                    "patches: auto\n");
-  const auto r = test::run_flankcam("fit " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
-  INFO(r.err);
-  REQUIRE(r.code == 0);
-  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  const auto report = job_report(dir, "fit");
   CHECK(double(report["cover"]["coverage"]) >= 0.95);
   REQUIRE(report["patches"].size() == 1);
   const auto& p = report["patches"][0];
