@@ -918,6 +918,14 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
   return out;
 }
 
+// The parameter blocks of row `row` of the rails: the 4 control points of a(t) it weighs, then b(t)'s.
+std::vector<double*> rail_blocks(const BasisRow& row, std::vector<double>& A, std::vector<double>& B) {
+  std::vector<double*> blocks;
+  for (int q = 0; q < 4; ++q) blocks.push_back(&A[size_t(3 * (row.first + q))]);
+  for (int q = 0; q < 4; ++q) blocks.push_back(&B[size_t(3 * (row.first + q))]);
+  return blocks;
+}
+
 // The floor's pulls (CheckSurface::floor_reach): per row, the tip's check sample nearest the part (a
 // flat end's rim point, or the ball of a ball end); where that part point lies under the tip, the
 // tip's lowest point over the part's tangent plane there (the rim point farthest along -g: a flat
@@ -961,11 +969,8 @@ void add_floor_pulls(ceres::Problem& problem, const Rails& rails, const ToolRadi
     const double height = (p - dist[k].q).dot(g) - lift;
     if (height > target + c.floor_reach * radius) continue;
     const BasisRow& row = rows[size_t(i)];
-    std::vector<double*> blocks;
-    for (int q = 0; q < 4; ++q) blocks.push_back(&A[size_t(3 * (row.first + q))]);
-    for (int q = 0; q < 4; ++q) blocks.push_back(&B[size_t(3 * (row.first + q))]);
     problem.AddResidualBlock(new fit_residuals::CheckResidual(row, cs.s, dist[k].q - shift, g, {}, target + lift, w, true),
-                             nullptr, blocks);
+                             nullptr, rail_blocks(row, A, B));
   }
 }
 }  // namespace
@@ -1128,9 +1133,7 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
       const std::vector<Footpoint>& fps = footpoints[p];
       for (int i = 0; i < m; ++i) {
         const BasisRow& row = rows[size_t(i)];
-        std::vector<double*> blocks;
-        for (int k = 0; k < 4; ++k) blocks.push_back(&A[size_t(3 * (row.first + k))]);
-        for (int k = 0; k < 4; ++k) blocks.push_back(&B[size_t(3 * (row.first + k))]);
+        std::vector<double*> blocks = rail_blocks(row, A, B);
         blocks.push_back(D.data());
         for (int j = 0; j < n; ++j) {
           const Footpoint& f = fps[size_t(i) * n + j];
@@ -1184,9 +1187,7 @@ Joint fit_rounds(const std::vector<const SurfaceIndex*>& surfaces, Joint st, con
           const double reach = cs.j >= 0 ? st.tool.d(cs.s) : cs.reach;
           if (!(dist[k].distance < R + o.check.band) || !(R - dist[k].distance < o.check.depth_limit * reach)) continue;
           const BasisRow& row = rows[size_t(cs.i)];
-          std::vector<double*> blocks;
-          for (int q = 0; q < 4; ++q) blocks.push_back(&A[size_t(3 * (row.first + q))]);
-          for (int q = 0; q < 4; ++q) blocks.push_back(&B[size_t(3 * (row.first + q))]);
+          std::vector<double*> blocks = rail_blocks(row, A, B);
           std::vector<double> c;
           if (cs.j >= 0) {
             c = tool_basis[size_t(cs.j)];
