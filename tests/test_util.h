@@ -1,6 +1,8 @@
 // Helpers shared by the test suites: scratch directories and small meshes.
 #pragma once
 #include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <cstdlib>
 #include <fstream>
@@ -123,6 +125,22 @@ inline TriMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, in
   }
   for (auto f : m.faces) out.faces.push_back({index[size_t(f[0])], index[size_t(f[1])], index[size_t(f[2])]});
   return out;
+}
+
+// The flank x = 0.01 (y - 30)^2 + 0.15 z (y 0..60, z 0..20 mm, leaning back 8.5 degrees; a cylinder or
+// cone moving along it envelopes it), 41 x 21 vertices, and the floor z <= 0 it stands on (mm).
+inline TriMesh leaning_flank() {
+  return grid_mesh(41, 21, [](int j, int k) {
+    const double y = 1.5 * j, z = 1.0 * k;
+    return Eigen::Vector3d(0.01 * (y - 30) * (y - 30) + 0.15 * z, y, z);
+  });
+}
+inline TriMesh floor_under_leaning_flank() { return box_mesh({-30, -20, -20}, {60, 80, 0}, 4); }
+
+// The height (z) of a flat end's lowest rim point: the tip face centred at `tip`, square to the unit
+// `axis`, of radius `radius`.
+inline double lowest_rim_z(const Eigen::Vector3d& tip, const Eigen::Vector3d& axis, double radius) {
+  return tip.z() - radius * std::sqrt(std::max(0.0, 1 - axis.z() * axis.z()));
 }
 
 // An exact envelope of an analytic motion, scaled to a unit diagonal (the fitting's frame).

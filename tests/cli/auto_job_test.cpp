@@ -166,14 +166,10 @@ TEST_CASE("the README's main job (examples/auto/blade.yaml) detects, fits and po
 
 TEST_CASE("patches: auto with a floor as the part: the tool's tip is brought onto the floor" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("auto-floor");
-  // The flank x = 0.01 (y - 30)^2 + 0.15 z (y 0..60, z 0..20 mm; a cone moving along it envelopes
-  // it) standing on a floor z <= 0, the part. Without the floor's pull the detected tool's tip
+  // test::leaning_flank standing on its floor, the part. Without the floor's pull the detected tool's tip
   // floated 0.23-0.33 mm above the floor, the flank's bottom row out of its reach.
-  write_obj(dir.file("flank.obj"), test::grid_mesh(41, 21, [](int j, int k) {
-              const double y = 1.5 * j, z = 1.0 * k;
-              return Eigen::Vector3d(0.01 * (y - 30) * (y - 30) + 0.15 * z, y, z);
-            }));
-  write_obj(dir.file("floor.obj"), test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4));
+  write_obj(dir.file("flank.obj"), test::leaning_flank());
+  write_obj(dir.file("floor.obj"), test::floor_under_leaning_flank());
   test::write_text(dir.file("job.yaml"),
                    "surface: flank.obj\npart: floor.obj\ncheck_tolerance: 0.005\ntool: {shape: cone}\ntolerance: 0.02\n"
                    "patches: auto\n");
@@ -192,7 +188,7 @@ TEST_CASE("patches: auto with a floor as the part: the tool's tip is brought ont
   for (size_t k = 2; k + 2 < cl.moves.size(); ++k) {
     const ClMove& m = cl.moves[k];
     CHECK_FALSE(m.rapid);
-    const double rim = m.pose.tip.z() - radius * std::sqrt(std::max(0.0, 1 - m.pose.axis.z() * m.pose.axis.z()));
+    const double rim = test::lowest_rim_z(m.pose.tip, m.pose.axis, radius);
     low = std::min(low, rim), high = std::max(high, rim);
     ++poses;
   }

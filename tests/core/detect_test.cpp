@@ -637,18 +637,14 @@ TEST_CASE("a motion whose contact line meets a slanted end of the surface is con
 }
 
 TEST_CASE("with a part: the tool's tip is pulled onto the floor and its flat end machines the flank's bottom row" * doctest::test_suite("heavy")) {
-  // The flank x = 0.01 (y - 30)^2 + 0.15 z (y 0..60, z 0..20 mm, leaning back 8.5 degrees; a cylinder
-  // or cone moving along it envelopes it) on a floor z <= 0, cone tools, the check tolerance 0.005 mm.
+  // test::leaning_flank on its floor, cone tools, the check tolerance 0.005 mm.
   // The fit's samples of Φ leave the tip's height along the axis nearly free: without the floor's
   // pull the tip floated 0.23-0.33 mm above the floor and the bottom row (z = 0) was machined nowhere
   // within 0.02 mm (by the side envelope or by the flat end).
-  const TriMesh phi_mm = test::grid_mesh(41, 21, [](int j, int k) {
-    const double y = 1.5 * j, z = 1.0 * k;
-    return Eigen::Vector3d(0.01 * (y - 30) * (y - 30) + 0.15 * z, y, z);
-  });
+  const TriMesh phi_mm = test::leaning_flank();
   const Similarity fr = unit_diagonal_frame(phi_mm);
   const SurfaceIndex phi(transformed(phi_mm, fr));
-  const SurfaceIndex floor(transformed(test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4), fr));
+  const SurfaceIndex floor(transformed(test::floor_under_leaning_flank(), fr));
   const auto bottom = [](const Eigen::Vector3d& x) { return x.z() < 0.5; };
   CoverOptions o = cylinders_with_part(fr, floor, 0.02);
   o.patch.fit.shape = ToolShape::Cone;
@@ -670,8 +666,8 @@ TEST_CASE("with a part: the tool's tip is pulled onto the floor and its flat end
   CHECK(by_end > 0);
   CHECK(d.coverage >= 0.99);
   CHECK(fr.length_to_mm(d.overcut) <= 0.02);
-  // The flat end's lowest rim point along the kept motion: on the floor, between the check
-  // tolerance into it and the tolerance above it.
+  // The flat end's lowest rim point along the kept motion (the rails as kept, t 0..1): on the floor,
+  // between the check tolerance into it and the tolerance above it.
   double low = INFINITY, high = -INFINITY;
   for (const DetectedPatch& p : d.patches) {
     CHECK(!p.fit.check_refused);
@@ -679,9 +675,8 @@ TEST_CASE("with a part: the tool's tip is pulled onto the floor and its flat end
     const Rails& r = p.fit.fit.rails;
     const double radius = fr.length_to_mm(p.fit.fit.tool.d(0));
     for (int k = 0; k <= 100; ++k) {
-      const double t = std::clamp(p.fit.t_from + (p.fit.t_to - p.fit.t_from) * k / 100.0, 0.0, 1.0);
-      const Eigen::Vector3d a = fr.to_mm(r.a.point(t)), u = (fr.to_mm(r.b.point(t)) - a).normalized();
-      const double rim = a.z() - radius * std::sqrt(std::max(0.0, 1 - u.z() * u.z()));
+      const Eigen::Vector3d a = fr.to_mm(r.a.point(k / 100.0)), b = fr.to_mm(r.b.point(k / 100.0));
+      const double rim = test::lowest_rim_z(a, (b - a).normalized(), radius);
       low = std::min(low, rim), high = std::max(high, rim);
     }
   }
