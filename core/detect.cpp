@@ -700,6 +700,7 @@ PatchOptions candidate_options(const CoverOptions& o) {
   // A held tool keeps its tip at the a end: the part must not turn it round (that would be the
   // mirrored tool), the start has its holder end along `up` already.
   if (po.fit.fixed_tool) po.orient_by_part = false;
+  po.fit.check.floor_reach = 0;  // the floor pass pulls the tip of each round's best only
   return po;
 }
 
@@ -823,6 +824,43 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
     before = kb, after = ka;
   }
   return f;
+}
+
+// The floor pass (CoverOptions::end): the round's best judged again with the tool's end swept, and
+// fitted again from its motion with the tip pulled onto the part's floor (its tool free), judged so
+// too; the one that brings more uncovered area is kept. A held tool (catalogue or shared) is left as
+// it is.
+Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<char>& covered, const std::vector<double>& area,
+                      const CoverOptions& o) {
+  PatchOptions po = candidate_options(o);
+  po.machined.end = o.end;
+  // with_check has turned the fit so that its tip is the a end: kept so.
+  po.orient_by_part = false;
+  po.fit.check.up = mean_axis(f.fit.fit.rails);
+  Fitted best;
+  const auto offer = [&](PatchFit p) {
+    std::optional<PatchFit> j = judged(surface, std::move(p), po);
+    if (!j || !machinable(*j)) return;
+    const double g = gain_of(*j, covered, area, po.tolerance);
+    if (!best.ok || g > best.gain) best.fit = std::move(*j), best.gain = g, best.ok = true;
+  };
+  offer(f.fit);
+  PatchFit pulled = f.fit;
+  PatchOptions pull = po;
+  pull.fit.check.floor_reach = o.patch.fit.check.floor_reach;
+  try {
+    pulled.fit = optimize_motion(surface, f.fit.fit.rails, pull.fit);
+    pulled.fit.eps_ini = f.fit.fit.eps_ini;
+    pulled.fit.iterations += f.fit.fit.iterations;
+    offer(std::move(pulled));
+  } catch (const InputError&) {
+    // the pulled motion left Φ: the patch as it was
+  }
+  if (!best.ok) return f;
+  best.cut = f.cut;
+  best.whole_gain = f.cut ? f.whole_gain : best.gain;
+  best.from_region = f.from_region;
+  return best;
 }
 
 // The principal axes of Φ's vertices, by increasing extent (columns).
@@ -1110,6 +1148,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       so.spares = 0;
       so.regions = 0;
       so.continue_ends = false;
+      so.floor_pass = false;
       int searched = 0;
       for (const Region& uncovered : uncovered_regions(ring, covered, area)) {
         // Named, not a structured binding: lambdas may not capture those before C++20 (clang refuses).
@@ -1161,6 +1200,10 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     if (best.ok && o.continue_ends) {
       report("continuing the best patch's motion past its ends");
       best = continued(surface, std::move(best), covered, area, o);
+    }
+    if (best.ok && o.end && o.floor_pass && o.patch.fit.check.part && o.patch.fit.check.floor_reach > 0 && !o.patch.fit.fixed_tool) {
+      report("fitting the best patch again with its tip on the part's floor");
+      best = floor_finished(surface, std::move(best), covered, area, o);
     }
     // An exchange round whose best brings no more than the patch set aside (and does not reach the
     // target): that one returns to its place and stays; the next round sets aside the next weakest.

@@ -131,12 +131,16 @@ std::optional<LoadedMesh> load_job_part(const Job& job) {
 
 namespace {
 // How a patch's machined surface is judged: `init:` patches with the job's tool end; detected
-// patches (detect_job) by the side envelope alone, as the detection judged them. (Detection with the
-// end swept too, the part given, was measured in session 33: rotor 37 90.9% -> 94.2% with 8 patches,
-// but the HECC impeller fell from 80.4% to 66.6% at its seventh patch; not the default.)
+// patches (detect_job) as the detection judged them: with a part, with the end (each round's best is
+// judged so by the floor pass, CoverOptions::end); without one, by the side envelope alone (a
+// detected tool's tip end is known only when detect_job turns it afterwards).
+ToolEnd job_end(const Job& job, const Similarity& frame) {
+  return ToolEnd{job.tool.end.kind, frame.length_to_unit(job.tool.end.corner_radius), frame.length_to_mm(1.0)};
+}
+
 MachinedSurfaceOptions machined_options(const Job& job, const Similarity& frame) {
   MachinedSurfaceOptions m;
-  if (!job.cover) m.end = ToolEnd{job.tool.end.kind, frame.length_to_unit(job.tool.end.corner_radius), frame.length_to_mm(1.0)};
+  if (!job.cover || job.part_given) m.end = job_end(job, frame);
   return m;
 }
 
@@ -379,6 +383,7 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   // blade's flank next to a hub: the tip at the hub, whichever way the work frame's Z points there).
   co.patch.orient_by_part = true;
   co.patch.refit_with_check = false;
+  if (job.part_given) co.end = job_end(job, out.frame);  // the floor pass (fit_options pulls the tip onto the part)
   co.patch.tolerance = out.frame.length_to_unit(job.tolerance_mm);
   // Candidate radii within the tool's limits (max_diameter, min_diameter): the default candidates
   // below the largest allowed, and that radius at 1/2, 3/4 and full.
