@@ -80,7 +80,6 @@ inline TriMesh wavy_grid(int nx, int ny, double sx, double sy, double amplitude)
   });
 }
 
-// A closed box, faces outward; each side split into n x n squares.
 // Both meshes as one (b's faces renumbered after a's vertices).
 inline TriMesh merged(TriMesh a, const TriMesh& b) {
   const int base = int(a.vertices.size());
@@ -89,6 +88,7 @@ inline TriMesh merged(TriMesh a, const TriMesh& b) {
   return a;
 }
 
+// A closed box, faces outward; each side split into n x n squares.
 inline TriMesh box_mesh(const Eigen::Vector3d& lo, const Eigen::Vector3d& hi, int n = 1) {
   TriMesh m;
   for (int axis = 0; axis < 3; ++axis)
