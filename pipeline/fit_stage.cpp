@@ -130,10 +130,10 @@ std::optional<LoadedMesh> load_job_part(const Job& job) {
 }
 
 namespace {
-// How a patch's machined surface is judged: `init:` patches with the job's tool end; detected
-// patches (detect_job) with a part with the end too, as the floor pass judged them (CoverOptions::end;
-// a held tool's patches, which it leaves, when their poses are cut short here); without a part by the
-// side envelope alone (a detected tool's tip end is known only when detect_job turns it afterwards).
+// How a patch's machined surface is judged: with the job's tool end swept, but for detected patches
+// without a part: by the side envelope alone (a detected tool's tip end is known only when detect_job
+// turns it afterwards). Detected with a part, the floor pass judged each patch so (CoverOptions::end);
+// a held tool's patches skip that pass and are judged with the end only if their poses are cut short.
 ToolEnd job_end(const Job& job, const Similarity& frame) {
   return ToolEnd{job.tool.end.kind, frame.length_to_unit(job.tool.end.corner_radius), frame.length_to_mm(1.0)};
 }
