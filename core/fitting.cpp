@@ -419,7 +419,7 @@ bool fit_plateaued(const std::vector<RoundMeasures>& history, double progress, i
 
 bool ToolConstraints::active() const {
   return min_radius > 0 || std::isfinite(max_radius) || std::isfinite(max_length) || min_tip_radius > 0 ||
-         max_cone_angle_rad < M_PI / 2 || convex;
+         min_ball_radius > 0 || max_cone_angle_rad < M_PI / 2 || convex;
 }
 
 std::string ToolConstraints::validate() const {
@@ -430,6 +430,8 @@ std::string ToolConstraints::validate() const {
   if (!(max_cone_angle_rad >= 0 && max_cone_angle_rad <= M_PI / 2)) return "tool.max_cone_angle: must be in 0 .. 90 deg";
   if (min_radius > max_radius) return "tool.min_diameter: larger than tool.max_diameter";
   if (min_tip_radius > max_radius) return "tool.min_tip_diameter: larger than tool.max_diameter";
+  if (!(min_ball_radius >= 0) || !std::isfinite(min_ball_radius)) return "tool.end.corner: must be finite and >= 0";
+  if (min_ball_radius > max_radius) return "tool.end.corner: larger than half of tool.max_diameter";
   return {};
 }
 
@@ -468,9 +470,10 @@ Eigen::VectorXd project(const Eigen::VectorXd& x0, const Eigen::MatrixXd& G, con
   }
   return x;
 }
-}  // namespace
 
-ConstraintRows constraint_rows(const ToolRadius& tool, double L, const ToolConstraints& c) {
+// The rows of constraint_rows, the ball rows' axis points taken from `ball_from` (constrained_tool
+// moves them with its projection).
+ConstraintRows rows_at(const ToolRadius& tool, const ToolRadius& ball_from, double L, const ToolConstraints& c) {
   const int K = int(tool.D.size());
   const Eigen::MatrixXd Q = slope_matrix(tool);
   const Eigen::VectorXd D = Eigen::Map<const Eigen::VectorXd>(tool.D.data(), K);
@@ -480,12 +483,12 @@ ConstraintRows constraint_rows(const ToolRadius& tool, double L, const ToolConst
   // A given max_cone_angle is that bound; without one the current slope is (so a tool that must taper
   // to stay out of a check surface needs max_cone_angle).
   double k = std::sin(c.max_cone_angle_rad);
-  const bool lower = c.min_radius > 0 || c.min_tip_radius > 0;
+  const bool lower = c.min_radius > 0 || c.min_tip_radius > 0 || c.min_ball_radius > 0;
   if (lower && !(c.max_cone_angle_rad < M_PI / 2)) {
     const double now = Q.rows() > 0 ? (Q * D).cwiseAbs().maxCoeff() / L : 0.0;
     k = std::min({k, std::max(1.05 * now, 0.02), 0.99});
     if (std::isfinite(c.max_radius)) {
-      const double r = std::max(c.min_radius, c.min_tip_radius) / c.max_radius;
+      const double r = std::max({c.min_radius, c.min_tip_radius, c.min_ball_radius}) / c.max_radius;
       k = std::min(k, std::sqrt(std::max(0.0, 1 - r * r)));
     }
   }
@@ -501,7 +504,26 @@ ConstraintRows constraint_rows(const ToolRadius& tool, double L, const ToolConst
     if (c.min_radius > 0) row(-e, -c.min_radius / cosk);
     if (std::isfinite(c.max_radius)) row(e, c.max_radius);
   }
-  if (c.min_tip_radius > 0) row(-Eigen::RowVectorXd::Unit(K, 0), -c.min_tip_radius / cosk);  // d(0) = D_0
+  const auto basis_row = [&](double s) {
+    const std::vector<double> b = tool.basis(s);
+    return Eigen::RowVectorXd(Eigen::Map<const Eigen::RowVectorXd>(b.data(), Eigen::Index(b.size())));
+  };
+  // The tip's limits, at s = 0 and (either_end) at s = 1. The ball row: the meridian's end lies at
+  // z0 = -d d'(z) from the end's axis point (meridian()), the ball's centre R further in, where
+  // d >= R keeps the ball inside the tool; R a hair larger (1e-4) so that the row's axis point,
+  // taken from the radii before the step, does not decide whether the corner fits after it.
+  const RadiusProfile from = ball_from.profile();
+  const double ball = std::min(c.min_ball_radius * (1 + 1e-4), c.max_radius);
+  for (const int end : {0, 1}) {
+    if (end == 1 && !c.either_end) break;
+    if (c.min_tip_radius > 0) row(-basis_row(end), -c.min_tip_radius / cosk);
+    if (c.min_ball_radius > 0) {
+      const double inward = end == 0 ? 1 : -1;  // the axis direction from this end into the tool
+      const double z0 = -from.d(end) * inward * from.d_s(end) / L;
+      const double s = std::clamp((z0 + ball) / L, 0.0, 1.0);
+      row(-basis_row(end == 0 ? s : 1 - s), -ball);
+    }
+  }
   if (k < 1)
     for (Eigen::Index i = 0; i < Q.rows(); ++i) row(Q.row(i), L * k), row(-Q.row(i), L * k);
   if (c.convex)  // d_s non-increasing: d concave, no waist
@@ -510,17 +532,39 @@ ConstraintRows constraint_rows(const ToolRadius& tool, double L, const ToolConst
   for (size_t i = 0; i < G.size(); ++i) out.G.row(Eigen::Index(i)) = G[i], out.h[Eigen::Index(i)] = h[i];
   return out;
 }
+}  // namespace
+
+ConstraintRows constraint_rows(const ToolRadius& tool, double L, const ToolConstraints& c) { return rows_at(tool, tool, L, c); }
 
 ToolRadius constrained_tool(const ToolRadius& tool, double L, const ToolConstraints& c) {
   if (!c.active()) return tool;
   if (auto err = c.validate(); !err.empty()) throw InputError(err);
-  const ConstraintRows rows = constraint_rows(tool, L, c);
+  ConstraintRows rows = constraint_rows(tool, L, c);
   ToolRadius out = tool;
   if (rows.h.size() == 0) return out;
-  const Eigen::VectorXd x = project(Eigen::Map<const Eigen::VectorXd>(tool.D.data(), Eigen::Index(tool.D.size())), rows.G, rows.h);
+  const Eigen::VectorXd x0 = Eigen::Map<const Eigen::VectorXd>(tool.D.data(), Eigen::Index(tool.D.size()));
+  Eigen::VectorXd x = project(x0, rows.G, rows.h);
+  // The ball rows' axis points moved by the projection: projected again with them taken from the
+  // result (a few rounds settle them: they move with the tip's slope times R).
+  for (int round = 0; round < 4 && c.min_ball_radius > 0; ++round) {
+    out.D.assign(x.data(), x.data() + x.size());
+    rows = rows_at(tool, out, L, c);
+    x = project(x0, rows.G, rows.h);
+  }
   out.D.assign(x.data(), x.data() + x.size());
   return out;
 }
+
+namespace {
+// ball_radius of a side meridian; 0 where it has none (no tip radius, too short for a ball).
+double end_ball_radius(const std::vector<Eigen::Vector2d>& side) {
+  try {
+    return ball_radius(side);
+  } catch (const InputError&) {
+    return 0;
+  }
+}
+}  // namespace
 
 ConstraintCheck check_constraints(const ToolRadius& tool, double L, const ToolConstraints& c) {
   const std::vector<Eigen::Vector2d> mer = meridian(tool, L, 121);
@@ -533,6 +577,15 @@ ConstraintCheck check_constraints(const ToolRadius& tool, double L, const ToolCo
   note(c.min_radius - rmin, "min_diameter");
   note(rmax - c.max_radius, "max_diameter");
   note(c.min_tip_radius - mer.front().y(), "min_tip_diameter");
+  if (c.either_end) note(c.min_tip_radius - mer.back().y(), "min_tip_diameter");
+  if (c.min_ball_radius > 0) {
+    note(c.min_ball_radius - end_ball_radius(mer), "end.corner");
+    if (c.either_end) {
+      std::vector<Eigen::Vector2d> turned;  // the meridian seen from its other end
+      for (auto p = mer.rbegin(); p != mer.rend(); ++p) turned.emplace_back(mer.back().x() - p->x(), p->y());
+      note(c.min_ball_radius - end_ball_radius(turned), "end.corner");
+    }
+  }
   note(mer.back().x() - std::min(0.0, mer.front().x()) - c.max_length, "max_length");
   for (size_t i = 1; i < mer.size(); ++i)
     note(std::atan2(std::abs(mer[i].y() - mer[i - 1].y()), mer[i].x() - mer[i - 1].x()) - c.max_cone_angle_rad, "max_cone_angle");

@@ -33,6 +33,14 @@ struct ToolConstraints {
   double min_tip_radius = 0;           // meridian radius at the tip end (s = 0)
   double max_cone_angle_rad = M_PI / 2;  // steepest meridian half angle, |asin d'(z)|
   bool convex = false;                 // d(s) concave: a meridian without a waist
+  // A rounded end's radius (tool.end {corner: R}): the tip's ball radius (tool_end.h ball_radius)
+  // at least this, so that the corner fits the tool. The ball centred R above the tip plane lies in
+  // the tool when the sphere of the axis point there has d >= R (the canal surface's spheres are
+  // inscribed), one linear row in D at that point (taken from the current radii).
+  double min_ball_radius = 0;
+  // The tip end is not known during the fit (detection turns a tool after it, by the part or the
+  // holder's side): the tip limits (min_tip_radius, min_ball_radius) hold at both ends.
+  bool either_end = false;
   [[nodiscard]] bool active() const;
   std::string validate() const;        // empty when valid, else names the field
 };
@@ -253,8 +261,8 @@ constexpr double kMaxSlenderness = 20;
 // of G D <= h below holds afterwards within 1e-12. `length` is the axis length L (unit frame).
 // Bounds on r are turned into bounds on d through the steepest slope the result may have.
 [[nodiscard]] ToolRadius constrained_tool(const ToolRadius& tool, double length, const ToolConstraints& c);
-// The constraint rows G D <= h for the current radii (the slope bound used for the r bounds is
-// taken from `tool`); exposed for tests.
+// The constraint rows G D <= h for the current radii (the slope bound used for the r bounds and
+// the axis point of the ball row are taken from `tool`); exposed for tests.
 struct ConstraintRows {
   Eigen::MatrixXd G;
   Eigen::VectorXd h;

@@ -383,18 +383,22 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   // blade's flank next to a hub: the tip at the hub, whichever way the work frame's Z points there).
   co.patch.orient_by_part = true;
   co.patch.refit_with_check = false;
+  // Detection turns a custom tool after its fit (by the part, or holder up without one): its tip
+  // limits hold at both ends, so that they hold at the end that becomes the tip.
+  co.patch.fit.constraints.either_end = !fit.fixed_tool;
   if (job.part_given) co.end = job_end(job, out.frame);  // the floor pass (fit_options pulls the tip onto the part)
   co.patch.tolerance = out.frame.length_to_unit(job.tolerance_mm);
   // Candidate radii within the tool's limits (max_diameter, min_diameter): the default candidates
   // below the largest allowed, and that radius at 1/2, 3/4 and full.
   const ToolConstraints& tc = fit.constraints;
-  if (std::isfinite(tc.max_radius) || tc.min_radius > 0) {
+  const double least = std::max(tc.min_radius, tc.min_ball_radius);
+  if (std::isfinite(tc.max_radius) || least > 0) {
     std::vector<double> radii;
     for (double r : co.radii)
-      if (r <= tc.max_radius && r >= tc.min_radius) radii.push_back(r);
+      if (r <= tc.max_radius && r >= least) radii.push_back(r);
     if (std::isfinite(tc.max_radius))
       for (double f : {0.5, 0.75, 1.0})
-        if (f * tc.max_radius >= tc.min_radius) radii.push_back(f * tc.max_radius);
+        if (f * tc.max_radius >= least) radii.push_back(f * tc.max_radius);
     std::sort(radii.begin(), radii.end());
     radii.erase(std::unique(radii.begin(), radii.end()), radii.end());
     if (!radii.empty()) co.radii = radii;
@@ -475,6 +479,8 @@ ToolConstraints unit_constraints(const ToolJob& t, const Similarity& fr) {
   c.min_tip_radius = fr.length_to_unit(t.min_tip_diameter_mm / 2);
   c.max_cone_angle_rad = t.max_cone_angle_deg * M_PI / 180;
   c.convex = t.convex;
+  // A corner end must fit the fitted tool's tip: held in the fit, not found too large after it.
+  if (t.end.kind == EndKind::Corner && !t.catalogue) c.min_ball_radius = fr.length_to_unit(t.end.corner_radius);
   return c;
 }
 
@@ -733,8 +739,9 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
     const CatalogueTool& c = *job.tool.catalogue;
     tool["catalogue"] = {{"name", c.name}, {"family", c.family}, {"file", c.file.string()}, {"line", c.line}};
   }
-  if (job.tool.constrained()) {
-    const ConstraintCheck cc = check_constraints(r.tool, r.rails.length, unit_constraints(job.tool, fr));
+  const ToolConstraints limits = unit_constraints(job.tool, fr);
+  if (limits.active()) {
+    const ConstraintCheck cc = check_constraints(r.tool, r.rails.length, limits);
     nlohmann::ordered_json lim;
     if (job.tool.min_diameter_mm > 0) lim["min_diameter_mm"] = job.tool.min_diameter_mm;
     if (std::isfinite(job.tool.max_diameter_mm)) lim["max_diameter_mm"] = job.tool.max_diameter_mm;
@@ -742,6 +749,7 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
     if (job.tool.min_tip_diameter_mm > 0) lim["min_tip_diameter_mm"] = job.tool.min_tip_diameter_mm;
     if (job.tool.max_cone_angle_deg < 90) lim["max_cone_angle_deg"] = job.tool.max_cone_angle_deg;
     if (job.tool.convex) lim["convex"] = true;
+    if (limits.min_ball_radius > 0) lim["end_corner_mm"] = job.tool.end.corner_radius;
     lim["met"] = cc.what.empty();
     if (!cc.what.empty()) lim["violated"] = cc.what;
     tool["constraints"] = lim;

@@ -188,7 +188,12 @@ void read_tool(const Reader& r, const YAML::Node& t, Job& job) {
   }
   if (const YAML::Node e = t["end"]) {
     tj.end = read_end(r, e);
-    // A catalogue tool is known now: its corner radius must fit it (a fitted tool's is checked after the fit).
+    // A catalogue tool is known now: its corner radius must fit it. A fitted tool is held to fit it
+    // in the fit (its tip's ball radius at least R), which max_diameter must leave room for.
+    if (tj.end.kind == EndKind::Corner && !tj.catalogue && 2 * tj.end.corner_radius > tj.max_diameter_mm)
+      r.fail(e["corner"], "tool.end.corner",
+             fmt::format("{} mm does not fit a tool of tool.max_diameter {} mm (at most half of it)", tj.end.corner_radius,
+                         tj.max_diameter_mm));
     if (tj.catalogue && tj.end.kind == EndKind::Corner) try {
         (void)end_profile(tj.catalogue->meridian_mm(), tj.end);
       } catch (const InputError& x) {

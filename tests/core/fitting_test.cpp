@@ -22,6 +22,7 @@
 #include "core/collision.h"
 #include "core/machined_surface.h"
 #include "core/patch.h"
+#include "core/tool_end.h"
 #include "tests/test_util.h"
 
 using namespace flankcam;
@@ -582,14 +583,60 @@ TEST_CASE("constrained_tool projects random radii onto every constraint row") {
     for (double& d : tool.D) d = u(rng);
     ToolConstraints c;
     c.min_radius = 0.04, c.max_radius = 0.12, c.min_tip_radius = 0.05, c.max_cone_angle_rad = 0.1, c.convex = trial % 2 == 0;
+    // A corner end on every fifth tool (its rows' axis points move with the projection: no fixed rows).
+    if (trial % 5 == 1) c.min_ball_radius = 0.07, c.either_end = trial % 10 == 1;
     const ToolRadius p = constrained_tool(tool, 0.3, c);
-    const ConstraintRows rows = constraint_rows(tool, 0.3, c);  // the rows the projection used
     const Eigen::VectorXd D = Eigen::Map<const Eigen::VectorXd>(p.D.data(), Eigen::Index(p.D.size()));
-    CHECK((rows.G * D - rows.h).maxCoeff() <= 1e-12);
+    if (c.min_ball_radius == 0) {
+      const ConstraintRows rows = constraint_rows(tool, 0.3, c);  // the rows the projection used
+      CHECK((rows.G * D - rows.h).maxCoeff() <= 1e-12);
+    }
     const ConstraintCheck cc = check_constraints(p, 0.3, c);
     CHECK(cc.violation == 0);
     CHECK(cc.what.empty());
   }
+}
+
+TEST_CASE("a corner end's radius is a constraint of the fit: the tip's ball radius at least R, at both ends where asked") {
+  // A cone narrowing away from its tip: d(0) = 0.1 above R = 0.095, yet its ball, d(0)(1 + sin a) with
+  // sin a = -0.1, is 0.09: a bound on d(0) alone would let the corner not fit.
+  const double L = 0.4, R = 0.095;
+  ToolRadius cone;
+  cone.shape = ToolShape::Cone;
+  cone.D = {0.1, 0.06};
+  CHECK(ball_radius(meridian(cone, L, 121)) == doctest::Approx(0.09).epsilon(1e-3));
+  ToolConstraints c;
+  c.min_ball_radius = R;
+  ConstraintCheck cc = check_constraints(cone, L, c);
+  CHECK(cc.what == "end.corner");
+  CHECK(cc.violation == doctest::Approx(R - 0.09).epsilon(1e-2));
+  ToolRadius held = constrained_tool(cone, L, c);
+  CHECK(ball_radius(meridian(held, L, 121)) >= R);
+  CHECK(ball_radius(meridian(held, L, 121)) < R * 1.001);  // the least change: on the bound
+  CHECK(check_constraints(held, L, c).what.empty());
+  // either_end: the wide end stays, the narrow end (0.06) is raised until its own ball is R.
+  c.either_end = true;
+  cc = check_constraints(held, L, c);
+  CHECK(cc.what == "end.corner");
+  held = constrained_tool(cone, L, c);
+  std::vector<Eigen::Vector2d> turned;
+  const std::vector<Eigen::Vector2d> mer = meridian(held, L, 121);
+  for (auto p = mer.rbegin(); p != mer.rend(); ++p) turned.emplace_back(mer.back().x() - p->x(), p->y());
+  CHECK(ball_radius(mer) >= R);
+  CHECK(ball_radius(turned) >= R);
+  CHECK(std::min(ball_radius(mer), ball_radius(turned)) < R * 1.001);
+  CHECK(check_constraints(held, L, c).what.empty());
+  // min_tip_radius at both ends too.
+  ToolConstraints t;
+  t.min_tip_radius = 0.08, t.either_end = true;
+  CHECK(check_constraints(cone, L, t).what == "min_tip_diameter");
+  const ToolRadius tipped = constrained_tool(cone, L, t);
+  const std::vector<Eigen::Vector2d> tm = meridian(tipped, L, 121);
+  CHECK(std::min(tm.front().y(), tm.back().y()) >= 0.08 - 1e-12);
+  // A corner larger than the largest radius allowed cannot be met: the limits say so.
+  ToolConstraints bad;
+  bad.min_ball_radius = 0.2, bad.max_radius = 0.15;
+  CHECK(bad.validate() == "tool.end.corner: larger than half of tool.max_diameter");
 }
 
 TEST_CASE("a tool on its diameter bound meets it (rounding is no violation), one a hair over is named") {

@@ -15,6 +15,7 @@
 
 #include "core/errors.h"
 #include "core/machined_surface.h"
+#include "core/tool_end.h"
 #include "pipeline/data_dir.h"
 #include "pipeline/fit_stage.h"
 #include "pipeline/run.h"
@@ -205,6 +206,7 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
       {"passes: [{allowance: 0.3}, {depth: 2}]", ":1: passes[1].depth: unknown key"},
       {"passes: []", ":1: passes: expected a list of 1 to 20 passes"},
       {"allowance: 0.1\npasses: [{allowance: 0}]", ":1: allowance: not with passes:"},
+      {"tool: {max_diameter: 10, end: {corner: 6}}", ":1: tool.end.corner: 6 mm does not fit a tool of tool.max_diameter 10 mm"},
   };
   for (const auto& c : cases) {
     CAPTURE(c.tool);
@@ -328,6 +330,37 @@ TEST_CASE("a job's tool limits hold on every fitted meridian, and the grinding s
       CHECK(rows[i][2] == doctest::Approx(2 * rows[i][1]).epsilon(1e-4));
     }
   }
+}
+
+TEST_CASE("a corner end larger than the free fit's tip allows is held in the fit: the fitted tool takes it" * doctest::test_suite("heavy")) {
+  test::ScratchDir dir("corner-fit");
+  // A cone narrowing away from its tip: d 6 -> 4 mm over 40 mm, sin a = -0.05, its ball radius at
+  // the tip d(0)(1 + sin a) = 5.7 mm. {corner: 5.9} does not fit that tool: the fit must widen the
+  // tip (it used to fit the side alone and stop afterwards: "larger than the tool's ball radius").
+  const EnvelopeJob e = envelope_job(dir, "twist", cone_profile(6, 4), 40);
+  const std::string lines = "patches:\n" + patch_yaml(e, "a", {0, 0.5, 1});
+  const pipeline::FitRun free_run = fit_job_file(dir, "surface: surface.obj\ntolerance: 0.05\ntool: {shape: cone}\n" + lines);
+  const pipeline::FittedPatch& f = free_run.fitted.patches.front();
+  const auto ball_mm = [](const pipeline::FitRun& r, const FitResult& fit) {
+    return r.fitted.frame.length_to_mm(ball_radius(meridian(fit.tool, fit.rails.length)));
+  };
+  const double free_ball = ball_mm(free_run, f.fit.fit);
+  MESSAGE("free fit: tip ball radius " << free_ball << " mm, coverage " << f.fit.coverage);
+  CHECK(free_ball < 5.8);  // 5.7 for the true tool
+  const pipeline::FitRun run =
+      fit_job_file(dir, "surface: surface.obj\ntolerance: 0.05\ntool: {shape: cone, end: {corner: 5.9}}\n" + lines);
+  const pipeline::FittedPatch& p = run.fitted.patches.front();
+  const double ball = ball_mm(run, p.fit.fit);
+  MESSAGE("corner 5.9: tip ball radius " << ball << " mm, coverage " << p.fit.coverage << ", eps "
+                                         << run.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max) << " mm");
+  CHECK(ball >= 5.9);
+  CHECK(ball < 5.9 * 1.001);  // the least change that fits it
+  CHECK(p.end_radius_mm == 5.9);
+  CHECK(run.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max) < 0.05);  // the side still fits within the tolerance
+  const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
+  CHECK(j["tool"]["end"]["radius_mm"] == 5.9);
+  CHECK(j["tool"]["constraints"]["end_corner_mm"] == 5.9);
+  CHECK(j["tool"]["constraints"]["met"] == true);
 }
 
 TEST_CASE("tool: {shared: true} gives two patches one identical meridian, each within the tolerance" * doctest::test_suite("heavy")) {
