@@ -889,6 +889,33 @@ ClProgram pass_program(const Job& job, const FittedJob& f, const FittedPatch& p,
   return cl;
 }
 
+namespace {
+// The cover's union anew from the patches that get programs (not refused): owner (patch indices),
+// deviation, coverage and overcut.
+void judge_cover(const Job& job, FittedJob& f) {
+  const size_t nv = f.unit_surface.vertices.size();
+  MachinedSurface none;  // a refused patch machines nothing
+  none.design_deviation.assign(nv, std::numeric_limits<double>::quiet_NaN());
+  std::vector<const MachinedSurface*> ms;
+  CoverResult& c = *f.cover;
+  c.refused = 0;
+  for (const FittedPatch& p : f.patches) {
+    ms.push_back(p.refused ? &none : &p.fit.machined);
+    c.refused += p.refused ? 1 : 0;
+  }
+  UnionDeviation u = union_deviation(ms, nv);
+  c.owner = std::move(u.owner);
+  c.coverage = coverage(f.unit_surface, u.deviation, f.frame.length_to_unit(job.tolerance_mm));
+  c.overcut_mm = 0;
+  c.deviation_mm = std::move(u.deviation);
+  for (double& x : c.deviation_mm) {
+    if (std::isfinite(x)) c.overcut_mm = std::max(c.overcut_mm, -x);
+    x = f.frame.length_to_mm(x);
+  }
+  c.overcut_mm = f.frame.length_to_mm(c.overcut_mm);
+}
+}  // namespace
+
 void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<KeptPoses>>& keep, std::string FittedPatch::*note,
                 const std::string& shortened, const Progress& progress) {
   if (std::none_of(keep.begin(), keep.end(), [](const auto& k) { return k.has_value(); })) return;
@@ -942,20 +969,17 @@ void keep_poses(const Job& job, FittedJob& f, const std::vector<std::optional<Ke
                          100 * p.fit.coverage));
   }
   if (!f.cover) return;
-  std::vector<const MachinedSurface*> ms;
-  for (const FittedPatch& p : f.patches) ms.push_back(&p.fit.machined);
-  UnionDeviation u = union_deviation(ms, f.unit_surface.vertices.size());
-  CoverResult& c = *f.cover;
-  c.owner = std::move(u.owner);
-  c.coverage = coverage(f.unit_surface, u.deviation, tolerance);
-  c.overcut_mm = 0;
-  c.deviation_mm = std::move(u.deviation);
-  for (double& x : c.deviation_mm) {
-    if (std::isfinite(x)) c.overcut_mm = std::max(c.overcut_mm, -x);
-    x = f.frame.length_to_mm(x);
-  }
-  c.overcut_mm = f.frame.length_to_mm(c.overcut_mm);
+  judge_cover(job, f);
   progress(cover_summary(job, f) + " after the cuts were shortened " + shortened);
+}
+
+void refuse_colliding(const Job& job, FittedJob& f, const Progress& progress) {
+  bool any = false;
+  for (FittedPatch& p : f.patches)
+    if (!p.collisions.clear() && !p.refused) p.refused = any = true;
+  if (!any || !f.cover) return;
+  judge_cover(job, f);
+  progress(cover_summary(job, f) + " without the refused patches");
 }
 
 ClProgram patch_program(const Job& job, const FittedJob& f, const FittedPatch& p, int tool) {
@@ -982,11 +1006,12 @@ std::string tool_label(const Job& job, const FittedPatch& p) {
 
 std::string cover_summary(const Job& job, const FittedJob& f) {
   if (!f.cover) return {};
-  return fmt::format("whole surface: {} patches{}, {:.1f}% within {} mm (stopped: {}{}{})", f.patches.size(),
+  return fmt::format("whole surface: {} patches{}, {:.1f}% within {} mm (stopped: {}{}{}{})", f.patches.size(),
                      job.tool.catalogue ? ", one catalogue tool" : job.tool.shared ? ", one shared tool" : "",
                      100 * f.cover->coverage, job.tolerance_mm, f.cover->stop,
                      f.cover->exchanged > 0 ? fmt::format("; {} exchanged for better", f.cover->exchanged) : "",
-                     f.cover->from_regions > 0 ? fmt::format("; {} found in uncovered regions searched alone", f.cover->from_regions) : "");
+                     f.cover->from_regions > 0 ? fmt::format("; {} found in uncovered regions searched alone", f.cover->from_regions) : "",
+                     f.cover->refused > 0 ? fmt::format("; {} refused for collisions, not counted", f.cover->refused) : "");
 }
 
 namespace {
@@ -1018,6 +1043,7 @@ nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
           {"regions", job.cover->regions},
           {"regions_searched", c.regions_searched},
           {"patches_from_regions", c.from_regions},
+          {"patches_refused", c.refused},
           {"patches", f.patches.size()},
           {"stop", c.stop},
           {"tolerance_mm", job.tolerance_mm},

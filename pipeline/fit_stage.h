@@ -52,6 +52,9 @@ struct FittedPatch {
   // The motion shortened to its longest stretch of poses clear of collisions ("poses A-B of N kept
   // (t ..): beyond them the shank would come ..."): shorten_to_clear; empty: not shortened.
   std::string kept_clear;
+  // Not clear of the part after shorten_to_clear, collisions not allowed: no program, and not in the
+  // cover's union (refuse_colliding).
+  bool refused = false;
 };
 
 // `patches: auto`: the whole surface as the union of the detected patches (core/detect.h).
@@ -65,6 +68,7 @@ struct CoverResult {
   int exchanged = 0;                  // patches replaced in exchange rounds (cover.exchanges)
   int regions_searched = 0;           // uncovered regions searched on their own (cover.regions)
   int from_regions = 0;               // patches kept that such a search found
+  int refused = 0;                    // patches refused for collisions, left out of the union
   // tool: {shared: true} (or a catalogue tool): one tool for every patch. Shared: the coverage with
   // the held tool (core/detect.h), and whether the joint refit of all patches was kept.
   bool one_tool = false;
@@ -156,6 +160,11 @@ void keep_poses(const Job& job, FittedJob& fitted, const std::vector<std::option
 // fit's check missed what the collision check sees near the ends of its motion. Not for
 // `--allow-collisions` (the user posts the whole motion).
 void shorten_to_clear(const Job& job, FittedJob& fitted, const Progress& progress);
+
+// Every patch still not clear (after shorten_to_clear) marked refused (FittedPatch::refused): it
+// gets no program, so with `patches: auto` the cover's union is judged anew without it (the surface
+// it would machine is not machined) and a progress line says so.
+void refuse_colliding(const Job& job, FittedJob& fitted, const Progress& progress);
 
 // The patch's CL-data (APT model): approach, the fitted poses at the job's feed, retract; the tool's
 // meridian in mm; a comment with the fitted error and one flagging allowed collisions.

@@ -146,11 +146,14 @@ FitRun fit_run(Job job, const RunOptions& o, ToolOf tool_of) {
   r.job = std::move(job);
   r.allow_collisions = o.allow_collisions;
   r.fitted = fit_job(r.job, o.threads, o.progress);
-  if (!o.allow_collisions) shorten_to_clear(r.job, r.fitted, o.progress);
+  if (!o.allow_collisions) {
+    shorten_to_clear(r.job, r.fitted, o.progress);
+    refuse_colliding(r.job, r.fitted, o.progress);
+  }
   r.cl_data.resize(r.fitted.patches.size());
   for (size_t k = 0; k < r.fitted.patches.size(); ++k) {
     const FittedPatch& p = r.fitted.patches[k];
-    if (p.collisions.clear() || o.allow_collisions) r.cl_data[k] = patch_program(r.job, r.fitted, p, tool_of(k));
+    if (!p.refused) r.cl_data[k] = patch_program(r.job, r.fitted, p, tool_of(k));
   }
   return r;
 }

@@ -32,6 +32,21 @@ std::string blade_job(const std::string& extra) {
          "      - [15.884, 9.359, -1.377, 8.927, 12.621, 60.707]\n";
 }
 
+// A block the fit never saw, 0.25 mm off the shank's side away from the blade, 5 mm above the
+// cutter's end at `pose`, from `back` mm behind it to `ahead` mm ahead of it along the motion (x).
+TriMesh shank_block(const pipeline::FittedPatch& p, size_t pose, double back, double ahead) {
+  const ToolPose& at_pose = p.poses.at(pose);
+  const double L = p.assembly.cutter_length(), rs = 0.5 * p.assembly.shank_diameter;
+  const Eigen::Vector3d axis = at_pose.axis.normalized(), at = at_pose.tip + (L + 5) * axis;
+  const double side = (at_pose.tip + 0.5 * L * axis - p.contacts.at(pose)).y() > 0 ? 1 : -1;
+  const double forward = p.poses.back().tip.x() > p.poses.front().tip.x() ? 1 : -1;
+  double face = -INFINITY;  // the shank's outermost y towards `side` over z in [L + 4, L + 6]
+  for (double z = L + 4; z <= L + 6; z += 0.1) face = std::max(face, side * (at_pose.tip + z * axis).y() + rs);
+  const double y0 = side * (face + 0.25), y1 = side * (face + 2);
+  const double xa = at.x() - forward * back, xb = at.x() + forward * ahead;
+  return test::box_mesh({std::min(xa, xb), std::min(y0, y1), at.z() - 0.5}, {std::max(xa, xb), std::max(y0, y1), at.z() + 0.5});
+}
+
 pipeline::RunResult run_job(const test::ScratchDir& dir, const std::string& yaml) {
   test::write_text(dir.file("job.yaml"), yaml);
   pipeline::Job j = pipeline::read_job(dir.file("job.yaml"));
@@ -295,6 +310,51 @@ TEST_CASE("flankcam run: a cut whose end has no clear lead is shortened to where
   CHECK(std::any_of(progress.begin(), progress.end(), [](const std::string& s) { return s.find("kept (t ") != std::string::npos; }));
 }
 
+TEST_CASE("a patch refused for collisions is left out of the cover's union: the surface it would cut is not counted" *
+          doctest::test_suite("heavy")) {
+  // Two patches of the blade: the whole motion (0) and its first quarter (1). A block off the shank
+  // at the whole motion's middle pose: patch 0 collides there, its longest clear stretch is under
+  // three quarters of it, so it is refused (no program); patch 1 stays clear of it. The cover (as for
+  // patches: auto) must then be what patch 1 alone machines.
+  test::ScratchDir dir("refused-cover");
+  test::write_text(dir.file("job.yaml"), blade_job("tool: {shape: cone}\nholder: {shank_length: 20, shank_diameter: 6, "
+                                                   "length: 30, diameter: 20}\nclearance: 0.5\n"));
+  pipeline::Job job = pipeline::read_job(dir.file("job.yaml"));
+  job.cover.emplace();
+  const pipeline::FitRun fitted = pipeline::fit(pipeline::read_job(dir.file("job.yaml")), {});  // owns the patches' jobs
+  pipeline::FittedJob f = fitted.fitted;
+  REQUIRE(f.patches.size() == 1);
+  const size_t n = f.patches[0].poses.size();
+  std::vector<std::string> progress;
+  const auto log = [&](const std::string& s) { progress.push_back(s); };
+  f.patches.push_back(f.patches[0]);
+  std::vector<std::optional<pipeline::KeptPoses>> keep(2);
+  keep[1] = pipeline::KeptPoses{0, n / 4, "its first quarter"};
+  pipeline::keep_poses(job, f, keep, &pipeline::FittedPatch::kept_clear, "for the test", log);
+  f.cover.emplace();
+  f.check_part = shank_block(f.patches[0], n / 2, 0.5, 3);
+  pipeline::check_job(job, f, log);
+  REQUIRE_FALSE(f.patches[0].collisions.clear());
+  REQUIRE(f.patches[1].collisions.clear());
+  pipeline::shorten_to_clear(job, f, log);
+  CHECK(f.patches[0].kept_clear.empty());  // no clear stretch of three quarters: not shortened
+  pipeline::refuse_colliding(job, f, log);
+  const pipeline::FittedPatch &whole = f.patches[0], &quarter = f.patches[1];
+  CHECK(whole.refused);
+  CHECK_FALSE(quarter.refused);
+  const pipeline::CoverResult& c = *f.cover;
+  MESSAGE("own coverage: whole " << whole.fit.coverage << ", quarter " << quarter.fit.coverage << "; cover " << c.coverage);
+  CHECK(c.refused == 1);
+  CHECK(quarter.fit.coverage < 0.5 * whole.fit.coverage);
+  CHECK(c.coverage == doctest::Approx(quarter.fit.coverage).epsilon(1e-12));
+  CHECK(std::none_of(c.owner.begin(), c.owner.end(), [](int o) { return o == 0; }));
+  CHECK(std::count(c.owner.begin(), c.owner.end(), 1) > 0);
+  const std::string summary = pipeline::cover_summary(job, f);
+  CHECK(summary.find("1 refused for collisions, not counted") != std::string::npos);
+  CHECK(progress.back() == summary + " without the refused patches");
+  CHECK(pipeline::cover_report(job, f)["patches_refused"] == 1);
+}
+
 TEST_CASE("flankcam run: a motion whose shank comes inside the clearance at its end is shortened to its clear poses and checked again" *
           doctest::test_suite("heavy")) {
   // The blade's patch fitted without a part. Then a block the fit never saw (the part the collision
@@ -313,18 +373,8 @@ TEST_CASE("flankcam run: a motion whose shank comes inside the clearance at its 
   REQUIRE(p0.collisions.clear());
   const size_t n = p0.poses.size();
   REQUIRE(n > 20);
-  // The shank's side away from the blade at the last pose, 5 mm above the cutter's end.
-  const ToolPose& end = p0.poses.back();
-  const double L = p0.assembly.cutter_length(), rs = 0.5 * p0.assembly.shank_diameter;
-  REQUIRE(rs == doctest::Approx(3));
-  const Eigen::Vector3d at = end.tip + (L + 5) * end.axis.normalized();
-  const double side = (end.tip + 0.5 * L * end.axis - p0.contacts.back()).y() > 0 ? 1 : -1;
-  const double forward = end.tip.x() > p0.poses.front().tip.x() ? 1 : -1;
-  double face = -INFINITY;  // the shank's outermost y towards `side` over z in [L + 4, L + 6]
-  for (double z = L + 4; z <= L + 6; z += 0.1) face = std::max(face, side * (end.tip + z * end.axis.normalized()).y() + rs);
-  const double y0 = side * (face + 0.25), y1 = side * (face + 2);
-  const double xa = at.x() - forward * 0.5, xb = at.x() + forward * 3;
-  f.check_part = test::box_mesh({std::min(xa, xb), std::min(y0, y1), at.z() - 0.5}, {std::max(xa, xb), std::max(y0, y1), at.z() + 0.5});
+  REQUIRE(0.5 * p0.assembly.shank_diameter == doctest::Approx(3));
+  f.check_part = shank_block(p0, n - 1, 0.5, 3);
   std::vector<std::string> progress;
   const auto log = [&](const std::string& s) { progress.push_back(s); };
   pipeline::check_job(job, f, log);
@@ -399,13 +449,7 @@ TEST_CASE("flankcam run: a motion whose shank comes inside the clearance at its 
   // A block beside the middle of the motion as well: no clear stretch of three quarters of the motion
   // is left, and the motion is refused whole, its collisions reported, as before.
   pipeline::FittedJob g = plain.fitted;
-  const ToolPose& mid = p0.poses[n / 2];
-  const Eigen::Vector3d am = mid.tip + (L + 5) * mid.axis.normalized();
-  double face_m = -INFINITY;
-  for (double z = L + 4; z <= L + 6; z += 0.1) face_m = std::max(face_m, side * (mid.tip + z * mid.axis.normalized()).y() + rs);
-  const double m0 = side * (face_m + 0.25), m1 = side * (face_m + 2);
-  g.check_part = test::merged(*f.check_part, test::box_mesh({am.x() - 0.3, std::min(m0, m1), am.z() - 0.5},
-                                                            {am.x() + 0.3, std::max(m0, m1), am.z() + 0.5}));
+  g.check_part = test::merged(*f.check_part, shank_block(p0, n / 2, 0.3, 0.3));
   pipeline::check_job(job, g, log);
   REQUIRE(g.patches.at(0).collisions.intervals.size() >= 2);
   pipeline::shorten_to_clear(job, g, log);
