@@ -259,7 +259,11 @@ constexpr double kMaxSlenderness = 20;
 
 // The radii projected onto the constraints (least change of the parameters D): every row
 // of G D <= h below holds afterwards within 1e-12. `length` is the axis length L (unit frame).
-// Bounds on r are turned into bounds on d through the steepest slope the result may have.
+// Bounds on r are turned into bounds on d through the steepest slope the result may have. The ball
+// rows (min_ball_radius) stand at axis points that depend on the radii: they are taken from the
+// result and the projection repeated until they settle, so the rows at the result's own points hold.
+// The ball row asks for R (1 + kBallMargin) (constraint_rows).
+inline constexpr double kBallMargin = 1e-3;
 [[nodiscard]] ToolRadius constrained_tool(const ToolRadius& tool, double length, const ToolConstraints& c);
 // The constraint rows G D <= h for the current radii (the slope bound used for the r bounds and
 // the axis point of the ball row are taken from `tool`); exposed for tests.

@@ -332,6 +332,7 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
     o.fit.check.up = holder_up(plain.fit.rails, plain.fit.tool, o.fit.check, 2 * o.fit.samples_t,
                                o.fit.check.up.value_or(mean_axis(plain.fit.rails)));
     if (mean_axis(plain.fit.rails).dot(*o.fit.check.up) < 0) plain = reversed(std::move(plain));
+    o.fit.constraints.either_end = false;  // its tip is at a now: the tip's limits hold there alone
   }
   // Clear along the whole motion: machine_and_trim's check (as dense as the collision check) found
   // no intrusion to trim for (check_trim is set only for one).

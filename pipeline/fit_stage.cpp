@@ -401,6 +401,8 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
         if (f * tc.max_radius >= least) radii.push_back(f * tc.max_radius);
     std::sort(radii.begin(), radii.end());
     radii.erase(std::unique(radii.begin(), radii.end()), radii.end());
+    // None of them: a corner larger than every default, no max_diameter; it and 1.5 and 2 times it.
+    if (radii.empty() && least > 0 && !std::isfinite(tc.max_radius)) radii = {least, 1.5 * least, 2 * least};
     if (!radii.empty()) co.radii = radii;
   }
   // Tool policy: tool: {shared: true} one tool for every patch (detect_patches holds the first
@@ -1084,8 +1086,11 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
                    num(job.feed_mm_min), num(job.spindle_rpm), num(job.lead_in_mm), num(job.retract_mm));
   const FitOptions& o = job.fit;
   const ToolJob& t = job.tool;
+  const std::string end = t.end.kind == EndKind::Ball     ? ", end: ball"
+                          : t.end.kind == EndKind::Corner ? ", end: {corner: " + num(t.end.corner_radius) + "}"
+                                                          : "";
   if (t.catalogue) {
-    y += fmt::format("tool: {{catalogue: {}{}}}\n", t.catalogue->name, t.shared ? ", shared: true" : "");
+    y += fmt::format("tool: {{catalogue: {}{}{}}}\n", t.catalogue->name, t.shared ? ", shared: true" : "", end);
   } else {
     std::string extra;
     if (t.min_diameter_mm > 0) extra += ", min_diameter: " + num(t.min_diameter_mm);
@@ -1095,6 +1100,7 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
     if (t.max_cone_angle_deg < 90) extra += ", max_cone_angle: " + num(t.max_cone_angle_deg);
     if (t.convex) extra += ", convex: true";
     if (t.shared) extra += ", shared: true";
+    extra += end;
     y += fmt::format("tool: {{shape: {}, control_points: {}{}}}\n", to_string(o.shape), o.meridian_control_points, extra);
   }
   if (job.allowance_mm > 0) y += "allowance: " + num(job.allowance_mm) + "\n";
@@ -1134,6 +1140,7 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
   y += "patches:\n";
   for (const FittedPatch& fp : f.patches) {
     const PatchJob& pj = *fp.job;
+    if (fp.refused) y += fmt::format("  # {}: refused for collisions (no program; see report.json)\n", pj.name);
     y += fmt::format("  - name: {}\n    init: lines\n    rail: {}\n", pj.name, pj.rail);
     if (pj.length_mm > 0) y += "    length: " + fixed(pj.length_mm, 6) + "\n";
     y += "    lines:\n";

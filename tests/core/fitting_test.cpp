@@ -612,7 +612,7 @@ TEST_CASE("a corner end's radius is a constraint of the fit: the tip's ball radi
   CHECK(cc.violation == doctest::Approx(R - 0.09).epsilon(1e-2));
   ToolRadius held = constrained_tool(cone, L, c);
   CHECK(ball_radius(meridian(held, L, 121)) >= R);
-  CHECK(ball_radius(meridian(held, L, 121)) < R * 1.001);  // the least change: on the bound
+  CHECK(ball_radius(meridian(held, L, 121)) < R * (1 + 2 * kBallMargin));  // the least change: on the bound
   CHECK(check_constraints(held, L, c).what.empty());
   // either_end: the wide end stays, the narrow end (0.06) is raised until its own ball is R.
   c.either_end = true;
@@ -624,7 +624,7 @@ TEST_CASE("a corner end's radius is a constraint of the fit: the tip's ball radi
   for (auto p = mer.rbegin(); p != mer.rend(); ++p) turned.emplace_back(mer.back().x() - p->x(), p->y());
   CHECK(ball_radius(mer) >= R);
   CHECK(ball_radius(turned) >= R);
-  CHECK(std::min(ball_radius(mer), ball_radius(turned)) < R * 1.001);
+  CHECK(std::min(ball_radius(mer), ball_radius(turned)) < R * (1 + 2 * kBallMargin));
   CHECK(check_constraints(held, L, c).what.empty());
   // min_tip_radius at both ends too.
   ToolConstraints t;
@@ -633,6 +633,25 @@ TEST_CASE("a corner end's radius is a constraint of the fit: the tip's ball radi
   const ToolRadius tipped = constrained_tool(cone, L, t);
   const std::vector<Eigen::Vector2d> tm = meridian(tipped, L, 121);
   CHECK(std::min(tm.front().y(), tm.back().y()) >= 0.08 - 1e-12);
+  // A curved tool (a lens, its ball 2% short of R): held, the ball the run measures on its sampled
+  // meridian (61 points, fit_stage) still takes R, and the rows at the result's own points hold.
+  ToolRadius lens;
+  lens.shape = ToolShape::General;
+  for (int k = 0; k < 10; ++k) {
+    const double s = k / 9.0;
+    lens.D.push_back(0.04 + 0.06 * s - 0.06 * s * s);
+  }
+  const double lens_ball = ball_radius(meridian(lens, L, 2001));
+  ToolConstraints lc;
+  lc.min_ball_radius = 1.02 * lens_ball;
+  CHECK(check_constraints(lens, L, lc).what == "end.corner");
+  const ToolRadius held_lens = constrained_tool(lens, L, lc);
+  CHECK(ball_radius(meridian(held_lens, L, 61)) >= lc.min_ball_radius);
+  CHECK(ball_radius(meridian(held_lens, L, 2001)) < lc.min_ball_radius * (1 + 2 * kBallMargin));
+  CHECK(check_constraints(held_lens, L, lc).what.empty());
+  const ConstraintRows at_result = constraint_rows(held_lens, L, lc);
+  const Eigen::VectorXd DL = Eigen::Map<const Eigen::VectorXd>(held_lens.D.data(), Eigen::Index(held_lens.D.size()));
+  CHECK((at_result.G * DL - at_result.h).maxCoeff() <= 1e-12);
   // A corner larger than the largest radius allowed cannot be met: the limits say so.
   ToolConstraints bad;
   bad.min_ball_radius = 0.2, bad.max_radius = 0.15;

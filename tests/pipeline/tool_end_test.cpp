@@ -317,8 +317,8 @@ TEST_CASE("a patch refused for collisions is left out of the cover's union: the 
   // three quarters of it, so it is refused (no program); patch 1 stays clear of it. The cover (as for
   // patches: auto) must then be what patch 1 alone machines.
   test::ScratchDir dir("refused-cover");
-  test::write_text(dir.file("job.yaml"), blade_job("tool: {shape: cone}\nholder: {shank_length: 20, shank_diameter: 6, "
-                                                   "length: 30, diameter: 20}\nclearance: 0.5\n"));
+  test::write_text(dir.file("job.yaml"), blade_job("tool: {shape: cone, end: {corner: 1}}\nholder: {shank_length: 20, "
+                                                   "shank_diameter: 6, length: 30, diameter: 20}\nclearance: 0.5\n"));
   pipeline::Job job = pipeline::read_job(dir.file("job.yaml"));
   job.cover.emplace();
   const pipeline::FitRun fitted = pipeline::fit(pipeline::read_job(dir.file("job.yaml")), {});  // owns the patches' jobs
@@ -353,6 +353,10 @@ TEST_CASE("a patch refused for collisions is left out of the cover's union: the 
   CHECK(summary.find("1 refused for collisions, not counted") != std::string::npos);
   CHECK(progress.back() == summary + " without the refused patches");
   CHECK(pipeline::cover_report(job, f)["patches_refused"] == 1);
+  // detected-job.yaml marks it (a re-run would fit it again) and keeps the tool's end.
+  const std::string detected = pipeline::detected_job_yaml(job, f);
+  CHECK(detected.find("  # blade: refused for collisions (no program; see report.json)\n  - name: blade\n") != std::string::npos);
+  CHECK(detected.find("end: {corner: 1}}") != std::string::npos);
 }
 
 TEST_CASE("flankcam run: a motion whose shank comes inside the clearance at its end is shortened to its clear poses and checked again" *
