@@ -149,6 +149,13 @@ TEST_CASE("a ball end on the blade's general tool: the checks' cutter starts on 
   CHECK(b.assembly.cutter.front() == Eigen::Vector2d(0, 0));
   CHECK(b.assembly.validate().empty());
   CHECK(b.end_radius_mm > 0.5 * b.profile_mm[16].y());
+  // Its top is the flat end's: the cutter ends at the axis end, where the fit put shank and holder
+  // (the side meridian alone ends d(1) sin a short of it on a tool widening towards its holder).
+  const double axis_mm = ball.fit.fitted.frame.length_to_mm(b.fit.fit.rails.length);
+  CHECK(b.assembly.cutter_length() == doctest::Approx(axis_mm).epsilon(1e-12));
+  CHECK(b.profile_mm.back().x() == doctest::Approx(axis_mm).epsilon(1e-12));
+  const std::vector<Eigen::Vector2d> side = meridian(b.fit.fit.tool, b.fit.fit.rails.length);
+  MESSAGE("side meridian ends " << axis_mm - ball.fit.fitted.frame.length_to_mm(side.back().x()) << " mm below the axis end");
   MESSAGE("ball radius " << b.end_radius_mm << " mm on a tip radius " << b.profile_mm[16].y() << " mm; coverage " << b.fit.coverage);
   CHECK(!ball.programs.empty());
 }
