@@ -238,11 +238,6 @@ FileKey read_file_key(const Reader& r, const YAML::Node& n, const std::string& k
 
 }  // namespace
 
-bool ToolJob::constrained() const {
-  return min_diameter_mm > 0 || std::isfinite(max_diameter_mm) || std::isfinite(max_length_mm) || min_tip_diameter_mm > 0 ||
-         max_cone_angle_deg < 90 || convex;
-}
-
 Eigen::Matrix3d setup_rotation(const PostJob& post) {
   constexpr double deg = M_PI / 180;
   return (Eigen::AngleAxisd(post.setup_rotate_deg[2] * deg, Eigen::Vector3d::UnitZ()) *

@@ -67,7 +67,6 @@ struct ToolJob {
   std::optional<CatalogueTool> catalogue;                  // tool: {catalogue: NAME}
   bool shared = false;                                     // one tool for all patches
   ToolEnd end;                                             // tool.end: flat (default), ball, {corner: R mm}
-  [[nodiscard]] bool constrained() const;
 };
 
 
