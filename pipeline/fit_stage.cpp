@@ -908,12 +908,8 @@ void judge_cover(const Job& job, FittedJob& f) {
   MachinedSurface none;  // a refused patch machines nothing
   none.design_deviation.assign(nv, std::numeric_limits<double>::quiet_NaN());
   std::vector<const MachinedSurface*> ms;
+  for (const FittedPatch& p : f.patches) ms.push_back(p.refused ? &none : &p.fit.machined);
   CoverResult& c = *f.cover;
-  c.refused = 0;
-  for (const FittedPatch& p : f.patches) {
-    ms.push_back(p.refused ? &none : &p.fit.machined);
-    c.refused += p.refused ? 1 : 0;
-  }
   UnionDeviation u = union_deviation(ms, nv);
   c.owner = std::move(u.owner);
   c.coverage = coverage(f.unit_surface, u.deviation, f.frame.length_to_unit(job.tolerance_mm));
@@ -1015,14 +1011,22 @@ std::string tool_label(const Job& job, const FittedPatch& p) {
   return std::string(to_string(p.fit.fit.tool.shape)) + (job.tool.shared ? " (shared)" : "");
 }
 
+namespace {
+// Patches refused for collisions (refuse_colliding): left out of the cover's union.
+long refused_patches(const FittedJob& f) {
+  return std::count_if(f.patches.begin(), f.patches.end(), [](const FittedPatch& p) { return p.refused; });
+}
+}  // namespace
+
 std::string cover_summary(const Job& job, const FittedJob& f) {
   if (!f.cover) return {};
+  const long refused = refused_patches(f);
   return fmt::format("whole surface: {} patches{}, {:.1f}% within {} mm (stopped: {}{}{}{})", f.patches.size(),
                      job.tool.catalogue ? ", one catalogue tool" : job.tool.shared ? ", one shared tool" : "",
                      100 * f.cover->coverage, job.tolerance_mm, f.cover->stop,
                      f.cover->exchanged > 0 ? fmt::format("; {} exchanged for better", f.cover->exchanged) : "",
                      f.cover->from_regions > 0 ? fmt::format("; {} found in uncovered regions searched alone", f.cover->from_regions) : "",
-                     f.cover->refused > 0 ? fmt::format("; {} refused for collisions, not counted", f.cover->refused) : "");
+                     refused > 0 ? fmt::format("; {} refused for collisions, not counted", refused) : "");
 }
 
 namespace {
@@ -1054,7 +1058,7 @@ nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
           {"regions", job.cover->regions},
           {"regions_searched", c.regions_searched},
           {"patches_from_regions", c.from_regions},
-          {"patches_refused", c.refused},
+          {"patches_refused", refused_patches(f)},
           {"patches", f.patches.size()},
           {"stop", c.stop},
           {"tolerance_mm", job.tolerance_mm},

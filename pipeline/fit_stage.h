@@ -68,7 +68,6 @@ struct CoverResult {
   int exchanged = 0;                  // patches replaced in exchange rounds (cover.exchanges)
   int regions_searched = 0;           // uncovered regions searched on their own (cover.regions)
   int from_regions = 0;               // patches kept that such a search found
-  int refused = 0;                    // patches refused for collisions, left out of the union
   // tool: {shared: true} (or a catalogue tool): one tool for every patch. Shared: the coverage with
   // the held tool (core/detect.h), and whether the joint refit of all patches was kept.
   bool one_tool = false;
