@@ -257,7 +257,7 @@ PointSeeds best_lines_at(const SurfaceIndex& surface, const std::vector<std::vec
   // near-plane but for its leading edge) it pointed anywhere, along the chord too, and the first
   // patch brought 31% instead of 79%. There a tool's axis is laid across Φ's width, so that one tool
   // spans the flank.
-  if (pc.valid && !(pc.radius > 0 && pc.radius < 50)) {
+  if (pc.valid && (o.across || !(pc.radius > 0 && pc.radius < 50))) {
     const Eigen::Vector3d w = width - width.dot(n) * n;
     if (w.norm() > 0.3) pc.least = w.normalized();
   }
@@ -884,6 +884,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   const size_t nv = m.vertices.size();
   const std::vector<double> area = vertex_areas(m);
   const Eigen::Matrix3d extents = extent_axes(m);
+  const Eigen::Vector3d width = o.width.value_or(Eigen::Vector3d(extents.col(1)));
   const double tol = o.patch.tolerance;
   Detection out;
   // The patches of the cover, in the order found.
@@ -1010,7 +1011,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     std::vector<PointSeeds> at_point(points.size());
 #pragma omp parallel for schedule(dynamic, 1)
     for (int k = 0; k < int(points.size()); ++k)
-      at_point[size_t(k)] = best_lines_at(surface, ring, points[size_t(k)], extents.col(1), o);
+      at_point[size_t(k)] = best_lines_at(surface, ring, points[size_t(k)], width, o);
     bool any_seed = false;
     for (const auto& ps : at_point)
       for (const Seed& sd : ps.best) any_seed |= std::isfinite(sd.F);
@@ -1149,6 +1150,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       so.regions = 0;
       so.continue_ends = false;
       so.floor_pass = false;
+      so.width = width;
       int searched = 0;
       for (const Region& uncovered : uncovered_regions(ring, covered, area)) {
         // Named, not a structured binding: lambdas may not capture those before C++20 (clang refuses).
@@ -1168,33 +1170,40 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         ++out.regions_searched;
         searched_regions.push_back(region);
         SubSurface sub = sub_surface(m, ring, region, o.band);
-        const std::string name = fmt::format("uncovered region of {:.1f}%", 100 * size);
-        const auto forward = [&](const CoverProgress& p) {
-          progress.seed = p.seed, progress.seeds = p.seeds;
-          report(name + ": " + p.stage);
-        };
-        Detection d;
         std::optional<SurfaceIndex> index;
         try {
           index.emplace(std::move(sub.mesh));
-          d = detect_patches(*index, so, forward);
         } catch (const InputError&) {
           continue;  // too small a piece of surface to fit on
         }
-        out.seeds_tried += d.seeds_tried;
-        if (d.patches.empty()) continue;
-        const PatchFit& found = d.patches.front().fit;
-        // As fitted on the region, and refitted on Φ from its motion.
-        Fitted as_is;
-        std::optional<PatchFit> j = judged(surface, found, candidate_options(o));
-        if (j) as_is.fit = std::move(*j);
-        if (j && machinable(as_is.fit)) as_is.ok = true, as_is.gain = as_is.whole_gain = gain_of(as_is.fit, covered, area, tol);
-        report(name + ": refitting its patch on the whole surface");
-        Fitted refit = fit_candidate(surface, found.trajectory.value_or(LineTrajectory{}), covered, area, o, &found.fit.rails);
-        ++out.seeds_tried;
-        as_is.from_region = refit.from_region = true;
-        offer(std::move(as_is));
-        offer(std::move(refit));
+        for (const bool across : {false, true}) {
+          so.across = across;
+          const std::string name = fmt::format("uncovered region of {:.1f}%{}", 100 * size, across ? ", across Φ" : "");
+          const auto forward = [&](const CoverProgress& p) {
+            progress.seed = p.seed, progress.seeds = p.seeds;
+            report(name + ": " + p.stage);
+          };
+          Detection d;
+          try {
+            d = detect_patches(*index, so, forward);
+          } catch (const InputError&) {
+            continue;  // too small a piece of surface to fit on
+          }
+          out.seeds_tried += d.seeds_tried;
+          if (d.patches.empty()) continue;
+          const PatchFit& found = d.patches.front().fit;
+          // As fitted on the region, and refitted on Φ from its motion.
+          Fitted as_is;
+          std::optional<PatchFit> j = judged(surface, found, candidate_options(o));
+          if (j) as_is.fit = std::move(*j);
+          if (j && machinable(as_is.fit)) as_is.ok = true, as_is.gain = as_is.whole_gain = gain_of(as_is.fit, covered, area, tol);
+          report(name + ": refitting its patch on the whole surface");
+          Fitted refit = fit_candidate(surface, found.trajectory.value_or(LineTrajectory{}), covered, area, o, &found.fit.rails);
+          ++out.seeds_tried;
+          as_is.from_region = refit.from_region = true;
+          offer(std::move(as_is));
+          offer(std::move(refit));
+        }
       }
     }
     if (best.ok && o.continue_ends) {

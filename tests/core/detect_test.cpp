@@ -256,6 +256,41 @@ TEST_CASE("an uncovered region searched as a surface of its own gives a candidat
   CHECK(worst_overcut(d) <= 2e-4);
 }
 
+TEST_CASE("a twisted strip is covered by lines laid across its width, not by lines along its least curvature" * doctest::test_suite("heavy")) {
+  // The hyperbolic paraboloid z = c (x - 15)(y - 60), x 0..30 mm across, y 0..120 mm along, its
+  // normal turning by 20 degrees across the width: straight lines run across it (y fixed), and a
+  // cylinder of 1.5 mm along one, moved along y, follows it within 0.02 mm. Its principal directions
+  // are at 45 degrees to those lines at its middle: the lines seeded around them, explored and fitted,
+  // end tilted 17 degrees out of the strip's plane and machine 62% of it. Seeded across the width
+  // (CoverOptions::across), the lines lie along the rulings and machine all of it.
+  constexpr double c = 0.01213;  // tan(20 deg) / 30 mm
+  const TriMesh mm = test::grid_mesh(21, 81, [&](int i, int j) {
+    const double x = 1.5 * i, y = 1.5 * j;
+    return Eigen::Vector3d(x, y, c * (x - 15) * (y - 60));
+  });
+  const Similarity fr = unit_diagonal_frame(mm);
+  const SurfaceIndex phi(transformed(mm, fr));
+  CoverOptions o;
+  o.patch.tolerance = fr.length_to_unit(0.02);
+  o.patch.fit.shape = ToolShape::Cylinder;
+  o.radii = {fr.length_to_unit(1.5)};
+  o.max_patches = 1;
+  o.exchanges = 0;
+  o.regions = 0;
+  const Detection along = detect_patches(phi, o);
+  o.across = true;
+  const Detection across = detect_patches(phi, o);
+  REQUIRE(across.patches.size() == 1);
+  const Rails& r = across.patches[0].fit.fit.rails;
+  const Eigen::Vector3d axis = (r.point(0.5, 1) - r.point(0.5, 0)).normalized();
+  MESSAGE("least curvature: ", along.patches.size(), " patch(es), ", along.coverage, "; across: ", across.coverage,
+          ", axis ", axis.transpose(), ", overcut ", fr.length_to_mm(across.overcut), " mm");
+  CHECK(std::abs(axis.x()) >= std::cos(10 * M_PI / 180));
+  CHECK(across.coverage >= 0.95);
+  CHECK(across.coverage >= along.coverage + 0.2);
+  CHECK(fr.length_to_mm(across.overcut) <= 0.02);
+}
+
 TEST_CASE("cover options name the bad field") {
   CoverOptions o;
   CHECK(o.validate().empty());
