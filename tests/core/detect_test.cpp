@@ -610,6 +610,27 @@ TEST_CASE("an exchange round that finds no better patch returns the one set asid
   CHECK(worst_overcut(d) <= 1e-4);
 }
 
+TEST_CASE("a cover that finds no further patch short of max_patches still has its exchange rounds" * doctest::test_suite("heavy")) {
+  // The arc envelope of the test above with room for 3 patches: after the first, no round brings
+  // 0.5% more, and detection used to stop there. Now the exchange round runs as at max_patches: the
+  // patch is set aside, nothing better is found, it returns; the stop is still "no progress".
+  test::ExactEnvelope ex = test::exact_envelope("arc", cone_profile(6, 9), 50, 150);
+  const SurfaceIndex surface(ex.unit_mesh);
+  CoverOptions o;
+  o.patch.tolerance = 5e-5;
+  o.coverage = 1.0;
+  o.max_patches = 3;
+  o.exchanges = 1;
+  ExchangeRounds x;
+  const Detection d = detect_patches(surface, o, x.progress());
+  MESSAGE("greedy ", x.greedy, "; ", d.patches.size(), " patch(es), ", d.coverage, ", rounds ", x.rounds, ", returned ", x.returned);
+  CHECK(d.patches.size() == 1);
+  CHECK(d.stop == CoverStop::NoProgress);
+  CHECK(x.rounds == 1);
+  CHECK(x.returned == 1);
+  CHECK(d.coverage == doctest::Approx(x.greedy).epsilon(1e-12));
+}
+
 TEST_CASE("an exchange round at max_patches replaces the weakest patch by one that brings more" * doctest::test_suite("heavy")) {
   // The twisted flank of the test above with one patch at most: the greedy's patch, found first, is
   // set aside in one exchange round, and the round's search from the whole surface finds a patch
