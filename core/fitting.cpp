@@ -419,7 +419,7 @@ bool fit_plateaued(const std::vector<RoundMeasures>& history, double progress, i
 
 bool ToolConstraints::active() const {
   return min_radius > 0 || std::isfinite(max_radius) || std::isfinite(max_length) || min_tip_radius > 0 ||
-         min_ball_radius > 0 || max_cone_angle_rad < M_PI / 2 || convex;
+         std::isfinite(max_tip_radius) || min_ball_radius > 0 || max_cone_angle_rad < M_PI / 2 || convex;
 }
 
 std::string ToolConstraints::validate() const {
@@ -430,6 +430,9 @@ std::string ToolConstraints::validate() const {
   if (!(max_cone_angle_rad >= 0 && max_cone_angle_rad <= M_PI / 2)) return "tool.max_cone_angle: must be in 0 .. 90 deg";
   if (min_radius > max_radius) return "tool.min_diameter: larger than tool.max_diameter";
   if (min_tip_radius > max_radius) return "tool.min_tip_diameter: larger than tool.max_diameter";
+  if (!(max_tip_radius > 0)) return "tool.max_tip_diameter: must be > 0";
+  if (min_tip_radius > max_tip_radius) return "tool.min_tip_diameter: larger than tool.max_tip_diameter";
+  if (min_radius > max_tip_radius) return "tool.min_diameter: larger than tool.max_tip_diameter";
   if (!(min_ball_radius >= 0) || !std::isfinite(min_ball_radius)) return "tool.end.corner: must be finite and >= 0";
   if (min_ball_radius > max_radius) return "tool.end.corner: larger than half of tool.max_diameter";
   return {};
@@ -518,6 +521,9 @@ ConstraintRows rows_at(const ToolRadius& tool, const ToolRadius& ball_from, doub
   for (const int end : {0, 1}) {
     if (end == 1 && !c.either_end) break;
     if (c.min_tip_radius > 0) row(-basis_row(end), -c.min_tip_radius / cosk);
+    // The meridian's r <= d there. Not at either end: a tool narrow at both ends (a lens) fits no
+    // flank (the HECC impeller: no patch); with_check holds it at the tip once the part has chosen it.
+    if (std::isfinite(c.max_tip_radius) && !c.either_end) row(basis_row(end), c.max_tip_radius);
     if (c.min_ball_radius > 0) {
       const double inward = end == 0 ? 1 : -1;  // the axis direction from this end into the tool
       const double z0 = -from.d(end) * inward * from.d_s(end) / L;
@@ -582,6 +588,7 @@ ConstraintCheck check_constraints(const ToolRadius& tool, double L, const ToolCo
   note(rmax - c.max_radius, "max_diameter");
   note(c.min_tip_radius - mer.front().y(), "min_tip_diameter");
   if (c.either_end) note(c.min_tip_radius - mer.back().y(), "min_tip_diameter");
+  if (!c.either_end) note(mer.front().y() - c.max_tip_radius, "max_tip_diameter");
   if (c.min_ball_radius > 0) {
     note(c.min_ball_radius - end_ball_radius(mer), "end.corner");
     if (c.either_end) {

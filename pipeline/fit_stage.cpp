@@ -488,6 +488,7 @@ ToolConstraints unit_constraints(const ToolJob& t, const Similarity& fr) {
   c.max_radius = std::isfinite(t.max_diameter_mm) ? fr.length_to_unit(t.max_diameter_mm / 2) : INFINITY;
   c.max_length = std::isfinite(t.max_length_mm) ? fr.length_to_unit(t.max_length_mm) : INFINITY;
   c.min_tip_radius = fr.length_to_unit(t.min_tip_diameter_mm / 2);
+  c.max_tip_radius = std::isfinite(t.max_tip_diameter_mm) ? fr.length_to_unit(t.max_tip_diameter_mm / 2) : INFINITY;
   c.max_cone_angle_rad = t.max_cone_angle_deg * M_PI / 180;
   c.convex = t.convex;
   // A corner end must fit the fitted tool's tip: held in the fit, not found too large after it.
@@ -758,6 +759,7 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
     if (std::isfinite(job.tool.max_diameter_mm)) lim["max_diameter_mm"] = job.tool.max_diameter_mm;
     if (std::isfinite(job.tool.max_length_mm)) lim["max_length_mm"] = job.tool.max_length_mm;
     if (job.tool.min_tip_diameter_mm > 0) lim["min_tip_diameter_mm"] = job.tool.min_tip_diameter_mm;
+    if (std::isfinite(job.tool.max_tip_diameter_mm)) lim["max_tip_diameter_mm"] = job.tool.max_tip_diameter_mm;
     if (job.tool.max_cone_angle_deg < 90) lim["max_cone_angle_deg"] = job.tool.max_cone_angle_deg;
     if (job.tool.convex) lim["convex"] = true;
     if (limits.min_ball_radius > 0) lim["end_corner_mm"] = job.tool.end.corner_radius;
@@ -1110,6 +1112,7 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
     if (std::isfinite(t.max_diameter_mm)) extra += ", max_diameter: " + num(t.max_diameter_mm);
     if (std::isfinite(t.max_length_mm)) extra += ", max_length: " + num(t.max_length_mm);
     if (t.min_tip_diameter_mm > 0) extra += ", min_tip_diameter: " + num(t.min_tip_diameter_mm);
+    if (std::isfinite(t.max_tip_diameter_mm)) extra += ", max_tip_diameter: " + num(t.max_tip_diameter_mm);
     if (t.max_cone_angle_deg < 90) extra += ", max_cone_angle: " + num(t.max_cone_angle_deg);
     if (t.convex) extra += ", convex: true";
     if (t.shared) extra += ", shared: true";

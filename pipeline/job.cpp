@@ -154,10 +154,10 @@ ToolEnd read_end(const Reader& r, const YAML::Node& e) {
 }
 
 // tool: {shape, control_points, min_diameter, max_diameter, max_length, min_tip_diameter,
-// max_cone_angle, convex, catalogue, shared, end}.
+// max_tip_diameter, max_cone_angle, convex, catalogue, shared, end}.
 void read_tool(const Reader& r, const YAML::Node& t, Job& job) {
   r.only_keys(t, "tool", {"shape", "control_points", "min_diameter", "max_diameter", "max_length", "min_tip_diameter",
-                          "max_cone_angle", "convex", "catalogue", "shared", "end"});
+                          "max_tip_diameter", "max_cone_angle", "convex", "catalogue", "shared", "end"});
   if (t["shape"]) job.fit.shape = read_shape(r, t["shape"]);
   if (t["control_points"]) job.fit.meridian_control_points = r.integer(t["control_points"], "tool.control_points", 4, max_samples_s);
   ToolJob& tj = job.tool;
@@ -168,6 +168,7 @@ void read_tool(const Reader& r, const YAML::Node& t, Job& job) {
   mm("max_diameter", tj.max_diameter_mm, 1e-3);
   mm("max_length", tj.max_length_mm, 1e-3);
   mm("min_tip_diameter", tj.min_tip_diameter_mm, 0);
+  mm("max_tip_diameter", tj.max_tip_diameter_mm, 1e-3);
   if (t["max_cone_angle"]) tj.max_cone_angle_deg = in_range(r, t["max_cone_angle"], "tool.max_cone_angle", 0, 90, "deg");
   if (t["convex"]) tj.convex = r.boolean(t["convex"], "tool.convex");
   if (t["shared"]) tj.shared = r.boolean(t["shared"], "tool.shared");
@@ -175,9 +176,13 @@ void read_tool(const Reader& r, const YAML::Node& t, Job& job) {
     r.fail(t["min_diameter"], "tool.min_diameter", fmt::format("{} mm is larger than tool.max_diameter", tj.min_diameter_mm));
   if (tj.min_tip_diameter_mm > tj.max_diameter_mm)
     r.fail(t["min_tip_diameter"], "tool.min_tip_diameter", fmt::format("{} mm is larger than tool.max_diameter", tj.min_tip_diameter_mm));
+  if (tj.min_tip_diameter_mm > tj.max_tip_diameter_mm)
+    r.fail(t["min_tip_diameter"], "tool.min_tip_diameter", fmt::format("{} mm is larger than tool.max_tip_diameter", tj.min_tip_diameter_mm));
+  if (tj.min_diameter_mm > tj.max_tip_diameter_mm)
+    r.fail(t["min_diameter"], "tool.min_diameter", fmt::format("{} mm is larger than tool.max_tip_diameter", tj.min_diameter_mm));
   if (const YAML::Node c = t["catalogue"]) {
     for (const char* k : {"shape", "control_points", "min_diameter", "max_diameter", "max_length", "min_tip_diameter",
-                          "max_cone_angle", "convex"})
+                          "max_tip_diameter", "max_cone_angle", "convex"})
       if (t[k]) r.fail(t[k], std::string("tool.") + k, "not with tool.catalogue (a catalogue tool is fixed; only its motion is fitted)");
     const std::string name = r.text(c, "tool.catalogue");
     try {

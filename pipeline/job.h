@@ -62,6 +62,7 @@ struct ToolJob {
   double min_diameter_mm = 0, max_diameter_mm = INFINITY;  // of the meridian
   double max_length_mm = INFINITY;                         // cutting length
   double min_tip_diameter_mm = 0;                          // at the tip end
+  double max_tip_diameter_mm = INFINITY;                   // at the tip end
   double max_cone_angle_deg = 90;                          // steepest half angle of the meridian
   bool convex = false;                                     // no waist
   std::optional<CatalogueTool> catalogue;                  // tool: {catalogue: NAME}

@@ -597,7 +597,7 @@ TEST_CASE("constrained_tool projects random radii onto every constraint row") {
   }
 }
 
-TEST_CASE("a corner end's radius is a constraint of the fit: the tip's ball radius at least R, at both ends where asked") {
+TEST_CASE("a corner end's radius and the tip's diameter limits are constraints of the fit, at both ends where asked") {
   // A cone narrowing away from its tip: d(0) = 0.1 above R = 0.095, yet its ball, d(0)(1 + sin a) with
   // sin a = -0.1, is 0.09: a bound on d(0) alone would let the corner not fit.
   const double L = 0.4, R = 0.095;
@@ -633,6 +633,25 @@ TEST_CASE("a corner end's radius is a constraint of the fit: the tip's ball radi
   const ToolRadius tipped = constrained_tool(cone, L, t);
   const std::vector<Eigen::Vector2d> tm = meridian(tipped, L, 121);
   CHECK(std::min(tm.front().y(), tm.back().y()) >= 0.08 - 1e-12);
+  // max_tip_radius: the wide tip (0.1) is brought down to it, the other end (0.06) left. The cone
+  // turned round meets it. At either end (detection, the tip not yet chosen) it is not held: narrow at
+  // both ends a tool fits no flank; with_check holds it once the part has chosen the tip.
+  ToolConstraints mt;
+  mt.max_tip_radius = 0.07;
+  CHECK(check_constraints(cone, L, mt).what == "max_tip_diameter");
+  const ToolRadius narrow = constrained_tool(cone, L, mt);
+  CHECK(narrow.D[0] == doctest::Approx(0.07).epsilon(1e-9));
+  CHECK(narrow.D[1] == doctest::Approx(0.06).epsilon(1e-9));
+  CHECK(meridian(narrow, L, 121).front().y() <= 0.07);
+  CHECK(check_constraints(narrow, L, mt).what.empty());
+  ToolRadius turned_cone = cone;
+  turned_cone.D = {0.06, 0.1};
+  CHECK(check_constraints(turned_cone, L, mt).what.empty());
+  mt.either_end = true;
+  CHECK(check_constraints(cone, L, mt).what.empty());
+  CHECK(constrained_tool(cone, L, mt).D == cone.D);
+  mt.min_tip_radius = 0.08;
+  CHECK(mt.validate() == "tool.min_tip_diameter: larger than tool.max_tip_diameter");
   // A curved tool (a lens, its ball 2% short of R): held, the ball the run measures on its sampled
   // meridian (61 points, fit_stage) still takes R, and the rows at the result's own points hold.
   ToolRadius lens;

@@ -196,6 +196,9 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
   } cases[] = {
       {"tool: {min_diameter: 12, max_diameter: 10}", ":1: tool.min_diameter: 12 mm is larger than tool.max_diameter"},
       {"tool: {max_cone_angle: 95}", ":1: tool.max_cone_angle: must be in 0 .. 90 deg"},
+      {"tool: {max_tip_diameter: 0}", ":1: tool.max_tip_diameter: must be in 0.001 .. "},
+      {"tool: {min_tip_diameter: 5, max_tip_diameter: 4}", ":1: tool.min_tip_diameter: 5 mm is larger than tool.max_tip_diameter"},
+      {"tool: {catalogue: cyl-d6-l20, max_tip_diameter: 4}", ":1: tool.max_tip_diameter: not with tool.catalogue"},
       {"tool: {catalogue: no-such-tool}", ":1: tool.catalogue: no tool 'no-such-tool' in the catalogue"},
       {"tool: {catalogue: cyl-d6-l20, shape: cone}", ":1: tool.shape: not with tool.catalogue"},
       {"tool: {catalogue: cyl-d6-l20, max_diameter: 8}", ":1: tool.max_diameter: not with tool.catalogue"},
@@ -361,6 +364,48 @@ TEST_CASE("a corner end larger than the free fit's tip allows is held in the fit
   CHECK(j["tool"]["end"]["radius_mm"] == 5.9);
   CHECK(j["tool"]["constraints"]["end_corner_mm"] == 5.9);
   CHECK(j["tool"]["constraints"]["met"] == true);
+}
+
+TEST_CASE("max_tip_diameter: a flat end beside a flank leaning over its floor reaches lower with a narrow tip" * doctest::test_suite("heavy")) {
+  // The plane x = 0.25 z (y 0..60, z 0..30 mm) over the floor z <= 0, the tool on its +x side: the
+  // flank meets the floor at 76 degrees. A flat end square to an axis along the flank dips with the rim
+  // away from it, and the rim at the flank stands 2 r sin(14 deg) above the floor: 2.4 mm for the Ø10
+  // cylinder the fit takes (measured: the lowest row within 0.02 mm is z 2.5 mm, 78.8% of the flank).
+  // Its tip at most Ø2 mm, the cone (Ø1.87 to Ø10) reaches z 1.0 mm (85.2%).
+  test::ScratchDir dir("max-tip");
+  const Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
+  write_obj(dir.file("flank.obj"), test::grid_mesh(41, 61, [](int j, int k) { return Eigen::Vector3d(0.125 * k, 1.5 * j, 0.5 * k); }));
+  write_obj(dir.file("floor.obj"), test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4));
+  std::string lines;
+  for (double y : {3.0, 30.0, 57.0}) {
+    const Eigen::Vector3d a = Eigen::Vector3d(0, y, 0) + 5 * n, b = a + 30 * up;
+    lines += fmt::format("      - [{}, {}, {}, {}, {}, {}]\n", a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
+  }
+  const auto lowest_reached = [&](const std::string& tool) {
+    const pipeline::FitRun run = fit_job_file(dir, "surface: flank.obj\npart: floor.obj\ntolerance: 0.02\ntool: " + tool +
+                                                       "\npatches:\n  - name: p\n    init: lines\n    lines:\n" + lines);
+    REQUIRE(run.fitted.patches.size() == 1);
+    const pipeline::FittedPatch& p = run.fitted.patches[0];
+    const auto& verts = run.fitted.surface.mesh.vertices;
+    const double tol = run.fitted.frame.length_to_unit(0.02);
+    double low = INFINITY;
+    for (size_t v = 0; v < verts.size(); ++v) {
+      const double d = p.fit.machined.design_deviation[v];
+      if (std::isfinite(d) && std::abs(d) <= tol) low = std::min(low, verts[v].z());  // the surface as read, mm
+    }
+    const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
+    MESSAGE(tool, ": tip Ø", 2 * p.profile_mm.front().y(), " mm, top Ø", 2 * p.profile_mm.back().y(), " mm, coverage ",
+            p.fit.coverage, ", lowest point within 0.02 mm: z ", low, " mm, intrusion ",
+            run.fitted.frame.length_to_mm(p.fit.check_intrusion), " mm");
+    CHECK(j["tool"]["constraints"]["met"] == true);
+    CHECK(machinable(p.fit));
+    return std::make_pair(low, 2 * p.profile_mm.front().y());
+  };
+  const auto wide = lowest_reached("{shape: cone, max_diameter: 10}");
+  const auto narrow = lowest_reached("{shape: cone, max_diameter: 10, max_tip_diameter: 2}");
+  CHECK(narrow.second <= 2 + 1e-6);
+  CHECK(wide.first >= 2.0);
+  CHECK(narrow.first <= 1.25);
 }
 
 TEST_CASE("tool: {shared: true} gives two patches one identical meridian, each within the tolerance" * doctest::test_suite("heavy")) {
