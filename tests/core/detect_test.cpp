@@ -73,8 +73,8 @@ struct TwistedFlank {
   SurfaceIndex floor{transformed(test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4), fr)};
 };
 
-// Counted from detection's progress with one patch at most and one exchange round: the greedy's
-// coverage as its patch is accepted, before any exchange (the same search as with exchanges: 0),
+// Counted from detection's progress with one exchange round: the greedy's coverage as its first
+// patch is accepted, before any exchange (the same search as with exchanges: 0),
 // the rounds begun, and the rounds whose patch set aside came back.
 struct ExchangeRounds {
   double greedy = -1;
@@ -87,6 +87,19 @@ struct ExchangeRounds {
     };
   }
 };
+
+// An exact envelope (arc motion, cone) that one patch machines nearly all of within 5e-5 of the
+// diagonal, covered to the unreachable target 100% with room for `max_patches` and one exchange round.
+Detection arc_cover_with_an_exchange(int max_patches, ExchangeRounds& x) {
+  const test::ExactEnvelope ex = test::exact_envelope("arc", cone_profile(6, 9), 50, 150);
+  const SurfaceIndex surface(ex.unit_mesh);
+  CoverOptions o;
+  o.patch.tolerance = 5e-5;
+  o.coverage = 1.0;
+  o.max_patches = max_patches;
+  o.exchanges = 1;
+  return detect_patches(surface, o, x.progress());
+}
 
 }  // namespace
 
@@ -588,15 +601,8 @@ TEST_CASE("an exchange round that finds no better patch returns the one set asid
   // reached, so the round at max_patches sets that patch aside and searches again from the whole
   // surface. Nothing brings more than the patch set aside: it returns to its place, and the cover is
   // the greedy's exactly.
-  test::ExactEnvelope ex = test::exact_envelope("arc", cone_profile(6, 9), 50, 150);
-  const SurfaceIndex surface(ex.unit_mesh);
-  CoverOptions o;
-  o.patch.tolerance = 5e-5;
-  o.coverage = 1.0;
-  o.max_patches = 1;
-  o.exchanges = 1;
   ExchangeRounds x;
-  const Detection d = detect_patches(surface, o, x.progress());
+  const Detection d = arc_cover_with_an_exchange(1, x);
   const double greedy = x.greedy;
   const int rounds = x.rounds, returned = x.returned;
   MESSAGE("greedy ", greedy, "; after the round: ", d.coverage, ", ", d.exchanged, " exchanged");
@@ -614,15 +620,8 @@ TEST_CASE("a cover that finds no further patch short of max_patches still has it
   // The arc envelope of the test above with room for 3 patches: after the first, no round brings
   // 0.5% more, and detection used to stop there. Now the exchange round runs as at max_patches: the
   // patch is set aside, nothing better is found, it returns; the stop is still "no progress".
-  test::ExactEnvelope ex = test::exact_envelope("arc", cone_profile(6, 9), 50, 150);
-  const SurfaceIndex surface(ex.unit_mesh);
-  CoverOptions o;
-  o.patch.tolerance = 5e-5;
-  o.coverage = 1.0;
-  o.max_patches = 3;
-  o.exchanges = 1;
   ExchangeRounds x;
-  const Detection d = detect_patches(surface, o, x.progress());
+  const Detection d = arc_cover_with_an_exchange(3, x);
   MESSAGE("greedy ", x.greedy, "; ", d.patches.size(), " patch(es), ", d.coverage, ", rounds ", x.rounds, ", returned ", x.returned);
   CHECK(d.patches.size() == 1);
   CHECK(d.stop == CoverStop::NoProgress);
