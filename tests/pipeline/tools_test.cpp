@@ -217,6 +217,10 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
     CAPTURE(msg);
     CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
   }
+  {
+    const std::string msg = tools_error_of(dir, "tool: {max_tip_diameter: 4}\nsurface: s.obj\npatches: auto\n");
+    CHECK(msg.find(dir.file("job.yaml") + ":1: tool.max_tip_diameter: with patches: auto it needs a part:") != std::string::npos);
+  }
   for (const char* key : {"allowance: 0.2", "tool: {catalogue: cyl-d6-l20}", "tool: {catalogue: cyl-d6-l20, shared: true}"}) {
     CAPTURE(key);
     const std::string msg = tools_error_of(dir, std::string(key) + "\nsurface: s.obj\npatches: auto\n");
