@@ -521,9 +521,7 @@ ConstraintRows rows_at(const ToolRadius& tool, const ToolRadius& ball_from, doub
   for (const int end : {0, 1}) {
     if (end == 1 && !c.either_end) break;
     if (c.min_tip_radius > 0) row(-basis_row(end), -c.min_tip_radius / cosk);
-    // The meridian's r <= d there. Not at either end: a tool narrow at both ends (a lens) fits no
-    // flank (the HECC impeller: no patch); with_check holds it at the tip once the part has chosen it.
-    if (std::isfinite(c.max_tip_radius) && !c.either_end) row(basis_row(end), c.max_tip_radius);
+    if (std::isfinite(c.max_tip_radius)) row(basis_row(end), c.max_tip_radius);  // the meridian's r <= d there
     if (c.min_ball_radius > 0) {
       const double inward = end == 0 ? 1 : -1;  // the axis direction from this end into the tool
       const double z0 = -from.d(end) * inward * from.d_s(end) / L;
@@ -588,7 +586,8 @@ ConstraintCheck check_constraints(const ToolRadius& tool, double L, const ToolCo
   note(rmax - c.max_radius, "max_diameter");
   note(c.min_tip_radius - mer.front().y(), "min_tip_diameter");
   if (c.either_end) note(c.min_tip_radius - mer.back().y(), "min_tip_diameter");
-  if (!c.either_end) note(mer.front().y() - c.max_tip_radius, "max_tip_diameter");
+  note(mer.front().y() - c.max_tip_radius, "max_tip_diameter");
+  if (c.either_end) note(mer.back().y() - c.max_tip_radius, "max_tip_diameter");
   if (c.min_ball_radius > 0) {
     note(c.min_ball_radius - end_ball_radius(mer), "end.corner");
     if (c.either_end) {

@@ -33,7 +33,10 @@ struct ToolConstraints {
   double min_tip_radius = 0;           // meridian radius at the tip end (s = 0)
   // The largest radius there: a flat end standing on a floor that meets the flank at an acute angle
   // (a hub under a leaning blade) digs in with the rim away from the flank, and the rim at the flank
-  // stays 2 r sin(90 deg - angle) above the floor; a small tip reaches lower.
+  // stays 2 r sin(90 deg - angle) above the floor; a small tip reaches lower. Not with detection
+  // (job.cpp refuses it): held at both ends it makes lenses that fit no flank, and held at the tip
+  // the part chooses it forbids the tip cut (cut_at_tip widens the tip) that keeps candidates out of
+  // a hub (the HECC impeller, max_tip_diameter 4: no patch either way).
   double max_tip_radius = INFINITY;
   double max_cone_angle_rad = M_PI / 2;  // steepest meridian half angle, |asin d'(z)|
   bool convex = false;                 // d(s) concave: a meridian without a waist
@@ -43,8 +46,7 @@ struct ToolConstraints {
   // inscribed), one linear row in D at that point (taken from the current radii).
   double min_ball_radius = 0;
   // The tip end is not known during the fit (detection turns a tool after it, by the part or the
-  // holder's side): the tip limits (min_tip_radius, min_ball_radius) hold at both ends; max_tip_radius
-  // at neither (at both it would make a lens), with_check fits again with it at the tip once turned.
+  // holder's side): the tip limits (min_tip_radius, max_tip_radius, min_ball_radius) hold at both ends.
   bool either_end = false;
   [[nodiscard]] bool active() const;
   std::string validate() const;        // empty when valid, else names the field

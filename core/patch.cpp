@@ -332,22 +332,7 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
     o.fit.check.up = holder_up(plain.fit.rails, plain.fit.tool, o.fit.check, 2 * o.fit.samples_t,
                                o.fit.check.up.value_or(mean_axis(plain.fit.rails)));
     if (mean_axis(plain.fit.rails).dot(*o.fit.check.up) < 0) plain = reversed(std::move(plain));
-    const bool either = o.fit.constraints.either_end;
     o.fit.constraints.either_end = false;  // its tip is at a now: the tip's limits hold there alone
-    // A tip limit the fit could not hold at an unknown end (max_tip_radius): tool and motion fitted
-    // again with it at this tip.
-    if (either && check_constraints(plain.fit.tool, plain.fit.rails.length, o.fit.constraints).violation > kConstraintSlack) {
-      if (o.on_stage) o.on_stage("fitting again with the tip's limits at the tip the part chose");
-      PatchFit held = plain;
-      try {
-        held.fit = optimize_motion(surface, plain.fit.rails, o.fit);
-        held.fit.eps_ini = plain.fit.eps_ini;
-        held.fit.iterations += plain.fit.iterations;
-        plain = std::move(held);
-      } catch (const InputError&) {
-        // the refit left Φ: the tool as fitted, its limit reported broken
-      }
-    }
   }
   // Clear along the whole motion: machine_and_trim's check (as dense as the collision check) found
   // no intrusion to trim for (check_trim is set only for one).

@@ -1112,7 +1112,6 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
     if (std::isfinite(t.max_diameter_mm)) extra += ", max_diameter: " + num(t.max_diameter_mm);
     if (std::isfinite(t.max_length_mm)) extra += ", max_length: " + num(t.max_length_mm);
     if (t.min_tip_diameter_mm > 0) extra += ", min_tip_diameter: " + num(t.min_tip_diameter_mm);
-    if (std::isfinite(t.max_tip_diameter_mm)) extra += ", max_tip_diameter: " + num(t.max_tip_diameter_mm);
     if (t.max_cone_angle_deg < 90) extra += ", max_cone_angle: " + num(t.max_cone_angle_deg);
     if (t.convex) extra += ", convex: true";
     if (t.shared) extra += ", shared: true";

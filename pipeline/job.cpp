@@ -367,11 +367,10 @@ Job read_job(const std::filesystem::path& file) {
     if (root["allowance"])
       r.fail(root["allowance"], "allowance",
              "not with patches: auto (list the patches, e.g. from detected-job.yaml; or passes: [{allowance: 0.3}, {allowance: 0}])");
-    // The tip's largest diameter is held at the tip the part chooses (with_check); without a part
-    // detection turns its tools after the fit and the limit could end at the holder.
-    if (const YAML::Node t = root["tool"]; t && t["max_tip_diameter"] && !job.part_given)
+    // The tip's largest diameter (ToolConstraints::max_tip_radius): no patch on the HECC impeller.
+    if (const YAML::Node t = root["tool"]; t && t["max_tip_diameter"])
       r.fail(t["max_tip_diameter"], "tool.max_tip_diameter",
-             "with patches: auto it needs a part: (the part chooses each tool's tip end; or list the patches)");
+             "not with patches: auto yet (list the patches, e.g. from detected-job.yaml)");
     if (!job.passes_mm.empty() && job.passes_mm.back() > 0)
       r.fail(root["passes"], "passes",
              "with patches: auto the last pass must have allowance 0 (detection fits the design surface itself; list the "

@@ -634,8 +634,7 @@ TEST_CASE("a corner end's radius and the tip's diameter limits are constraints o
   const std::vector<Eigen::Vector2d> tm = meridian(tipped, L, 121);
   CHECK(std::min(tm.front().y(), tm.back().y()) >= 0.08 - 1e-12);
   // max_tip_radius: the wide tip (0.1) is brought down to it, the other end (0.06) left. The cone
-  // turned round meets it. At either end (detection, the tip not yet chosen) it is not held: narrow at
-  // both ends a tool fits no flank; with_check holds it once the part has chosen the tip.
+  // turned round meets it; at either end its wide end is brought down too.
   ToolConstraints mt;
   mt.max_tip_radius = 0.07;
   CHECK(check_constraints(cone, L, mt).what == "max_tip_diameter");
@@ -648,8 +647,10 @@ TEST_CASE("a corner end's radius and the tip's diameter limits are constraints o
   turned_cone.D = {0.06, 0.1};
   CHECK(check_constraints(turned_cone, L, mt).what.empty());
   mt.either_end = true;
-  CHECK(check_constraints(cone, L, mt).what.empty());
-  CHECK(constrained_tool(cone, L, mt).D == cone.D);
+  CHECK(check_constraints(turned_cone, L, mt).what == "max_tip_diameter");
+  const ToolRadius both = constrained_tool(turned_cone, L, mt);
+  CHECK(both.D[1] == doctest::Approx(0.07).epsilon(1e-9));
+  CHECK(check_constraints(both, L, mt).what.empty());
   mt.min_tip_radius = 0.08;
   CHECK(mt.validate() == "tool.min_tip_diameter: larger than tool.max_tip_diameter");
   // A curved tool (a lens, its ball 2% short of R): held, the ball the run measures on its sampled

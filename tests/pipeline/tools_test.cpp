@@ -219,7 +219,7 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
   }
   {
     const std::string msg = tools_error_of(dir, "tool: {max_tip_diameter: 4}\nsurface: s.obj\npatches: auto\n");
-    CHECK(msg.find(dir.file("job.yaml") + ":1: tool.max_tip_diameter: with patches: auto it needs a part:") != std::string::npos);
+    CHECK(msg.find(dir.file("job.yaml") + ":1: tool.max_tip_diameter: not with patches: auto yet") != std::string::npos);
   }
   for (const char* key : {"allowance: 0.2", "tool: {catalogue: cyl-d6-l20}", "tool: {catalogue: cyl-d6-l20, shared: true}"}) {
     CAPTURE(key);
