@@ -704,6 +704,42 @@ PatchOptions candidate_options(const CoverOptions& o) {
   return po;
 }
 
+// A tip narrower than the tool (ToolConstraints::max_tip_radius) is held at the tip alone: the tool
+// widens towards its holder. Held at both ends (either_end: detection turns a tool after its fit) it
+// made lenses, narrow at both ends, that fitted nothing (the HECC impeller with max_tip_diameter 4:
+// no patch). So the tip end is chosen on the start motion, as it is after the fit: by the part
+// (holder_up with the start's own tool), without one by `up` (the spindle's side); the start is
+// turned so that its tip is the a end, and the fit holds the tip's limits there with that choice kept.
+bool tip_chosen_first(const CoverOptions& o) {
+  const PatchOptions& p = o.patch;
+  return !p.fit.fixed_tool && std::isfinite(p.fit.constraints.max_tip_radius) &&
+         (p.fit.check.part ? p.orient_by_part : o.up.has_value());
+}
+
+Rails tip_first(const SurfaceIndex& surface, Rails start, const CoverOptions& o, PatchOptions& po) {
+  const Eigen::Vector3d axis = mean_axis(start);
+  Eigen::Vector3d up = o.up.value_or(axis);
+  if (po.fit.check.part)
+    up = holder_up(start, initial_tool(surface, start, po.fit), po.fit.check, 2 * po.fit.samples_t,
+                   po.fit.check.up.value_or(up));
+  if (axis.dot(up) < 0) std::swap(start.a, start.b);
+  // The seed's axis lies at one radius from Φ along its length: its tip end is tilted towards Φ to
+  // within the tip's radius (square to the axis), so that the start is a tool narrowing to its tip
+  // (the fit, started from the wide tool held narrow at its tip, stayed 0.5 mm off a plane).
+  const double tip = 0.9 * po.fit.constraints.max_tip_radius;
+  for (Eigen::Index i = 0; i < start.a.ctrl.rows(); ++i) {
+    const Eigen::Vector3d a = start.a.ctrl.row(i).transpose(), b = start.b.ctrl.row(i).transpose();
+    const Eigen::Vector3d e = (b - a).normalized();
+    Eigen::Vector3d v = a - surface.closest(a).point;
+    v -= v.dot(e) * e;
+    if (const double r = v.norm(); r > tip) start.a.ctrl.row(i) = (a - (1 - tip / r) * v).transpose();
+  }
+  po.orient_by_part = false;
+  po.fit.check.up = mean_axis(start);
+  po.fit.constraints.either_end = false;
+  return start;
+}
+
 // A fitted motion machined over Φ and trimmed where it gouges; with a check surface kept out of the
 // part (with_check), rejected when no stretch keeps clear. Nothing when its tool cannot carry the
 // job's end (a ball wider than the tool, InputError from the machined surface): not a candidate.
@@ -718,11 +754,12 @@ std::optional<PatchFit> judged(const SurfaceIndex& surface, PatchFit f, const Pa
 Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, const std::vector<char>& covered,
                      const std::vector<double>& area, const CoverOptions& o, const Rails* start = nullptr) {
   Fitted out;
-  const PatchOptions po = candidate_options(o);
+  PatchOptions po = candidate_options(o);
   if (!start && tr.a.size() < size_t(po.fit.rail_control_points)) return out;
   try {
     out.fit.trajectory = tr;
     out.fit.initial = start ? *start : rails_from_trajectory(tr, po.fit);
+    if (tip_chosen_first(o)) out.fit.initial = tip_first(surface, std::move(out.fit.initial), o, po);
     if (po.fit.fixed_tool) out.fit.initial = held_tool_start(surface, out.fit.initial, o);
     out.fit.fit = optimize_motion(surface, out.fit.initial, po.fit);
   } catch (const InputError&) {
@@ -834,9 +871,10 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
                       const CoverOptions& o) {
   PatchOptions po = candidate_options(o);
   po.machined.end = o.end;
-  // with_check has turned the fit so that its tip is the a end: kept so.
+  // with_check has turned the fit so that its tip is the a end: kept so, the tip's limits held there.
   po.orient_by_part = false;
   po.fit.check.up = mean_axis(f.fit.fit.rails);
+  po.fit.constraints.either_end = false;
   Fitted best;
   const auto offer = [&](PatchFit p) {
     std::optional<PatchFit> j = judged(surface, std::move(p), po);

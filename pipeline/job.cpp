@@ -367,10 +367,6 @@ Job read_job(const std::filesystem::path& file) {
     if (root["allowance"])
       r.fail(root["allowance"], "allowance",
              "not with patches: auto (list the patches, e.g. from detected-job.yaml; or passes: [{allowance: 0.3}, {allowance: 0}])");
-    // The tip's largest diameter (ToolConstraints::max_tip_radius): no patch on the HECC impeller.
-    if (const YAML::Node t = root["tool"]; t && t["max_tip_diameter"])
-      r.fail(t["max_tip_diameter"], "tool.max_tip_diameter",
-             "not with patches: auto yet (list the patches, e.g. from detected-job.yaml)");
     if (!job.passes_mm.empty() && job.passes_mm.back() > 0)
       r.fail(root["passes"], "passes",
              "with patches: auto the last pass must have allowance 0 (detection fits the design surface itself; list the "

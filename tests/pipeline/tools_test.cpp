@@ -217,10 +217,6 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
     CAPTURE(msg);
     CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
   }
-  {
-    const std::string msg = tools_error_of(dir, "tool: {max_tip_diameter: 4}\nsurface: s.obj\npatches: auto\n");
-    CHECK(msg.find(dir.file("job.yaml") + ":1: tool.max_tip_diameter: not with patches: auto yet") != std::string::npos);
-  }
   for (const char* key : {"allowance: 0.2", "tool: {catalogue: cyl-d6-l20}", "tool: {catalogue: cyl-d6-l20, shared: true}"}) {
     CAPTURE(key);
     const std::string msg = tools_error_of(dir, std::string(key) + "\nsurface: s.obj\npatches: auto\n");
@@ -370,26 +366,23 @@ TEST_CASE("a corner end larger than the free fit's tip allows is held in the fit
   CHECK(j["tool"]["constraints"]["met"] == true);
 }
 
-TEST_CASE("max_tip_diameter: a flat end beside a flank leaning over its floor reaches lower with a narrow tip" * doctest::test_suite("heavy")) {
-  // The plane x = 0.25 z (y 0..60, z 0..30 mm) over the floor z <= 0, the tool on its +x side: the
-  // flank meets the floor at 76 degrees. A flat end square to an axis along the flank dips with the rim
-  // away from it, and the rim at the flank stands 2 r sin(14 deg) above the floor: 2.4 mm for the Ø10
-  // cylinder the fit takes (measured: the lowest row within 0.02 mm is z 2.5 mm, 78.8% of the flank).
-  // Its tip at most Ø2 mm, the cone (Ø1.87 to Ø10) reaches z 1.0 mm (85.2%).
-  test::ScratchDir dir("max-tip");
-  const Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
-  write_obj(dir.file("flank.obj"), test::grid_mesh(41, 61, [](int j, int k) { return Eigen::Vector3d(0.125 * k, 1.5 * j, 0.5 * k); }));
-  write_obj(dir.file("floor.obj"), test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4));
-  std::string lines;
-  for (double y : {3.0, 30.0, 57.0}) {
-    const Eigen::Vector3d a = Eigen::Vector3d(0, y, 0) + 5 * n, b = a + 30 * up;
-    lines += fmt::format("      - [{}, {}, {}, {}, {}, {}]\n", a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
+// The plane x = 0.25 z (y 0..60, z 0..30 mm) over the floor z <= 0, the tool on its +x side: the
+// flank meets the floor at 76 degrees. A flat end square to an axis along the flank dips with the rim
+// away from it, and the rim at the flank stands 2 r sin(14 deg) above the floor: 2.4 mm for a Ø10 tip.
+struct LeaningFlank {
+  test::ScratchDir dir{"max-tip"};
+  Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
+  LeaningFlank() {
+    write_obj(dir.file("flank.obj"), test::grid_mesh(41, 61, [](int j, int k) { return Eigen::Vector3d(0.125 * k, 1.5 * j, 0.5 * k); }));
+    write_obj(dir.file("floor.obj"), test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4));
   }
-  const auto lowest_reached = [&](const std::string& tool) {
-    const pipeline::FitRun run = fit_job_file(dir, "surface: flank.obj\npart: floor.obj\ntolerance: 0.02\ntool: " + tool +
-                                                       "\npatches:\n  - name: p\n    init: lines\n    lines:\n" + lines);
-    REQUIRE(run.fitted.patches.size() == 1);
-    const pipeline::FittedPatch& p = run.fitted.patches[0];
+  // The job's patch p: its tip and top diameters (mm), the lowest z of the flank within 0.02 mm, its
+  // tool's limits met (report) and the patch machinable.
+  struct Reach {
+    double lowest, tip, top;  // mm
+    double tip_z, top_z;      // the axis's ends halfway through the motion, mm
+  };
+  static Reach reach(const pipeline::FitRun& run, const pipeline::FittedPatch& p) {
     const auto& verts = run.fitted.surface.mesh.vertices;
     const double tol = run.fitted.frame.length_to_unit(0.02);
     double low = INFINITY;
@@ -398,18 +391,56 @@ TEST_CASE("max_tip_diameter: a flat end beside a flank leaning over its floor re
       if (std::isfinite(d) && std::abs(d) <= tol) low = std::min(low, verts[v].z());  // the surface as read, mm
     }
     const nlohmann::ordered_json j = pipeline::patch_report(run.job, run.fitted, p);
-    MESSAGE(tool, ": tip Ø", 2 * p.profile_mm.front().y(), " mm, top Ø", 2 * p.profile_mm.back().y(), " mm, coverage ",
-            p.fit.coverage, ", lowest point within 0.02 mm: z ", low, " mm, intrusion ",
-            run.fitted.frame.length_to_mm(p.fit.check_intrusion), " mm");
+    const Rails& rails = p.fit.fit.rails;
+    const Reach r{low, 2 * p.profile_mm.front().y(), 2 * p.profile_mm.back().y(), run.fitted.frame.to_mm(rails.a.point(0.5)).z(),
+                  run.fitted.frame.to_mm(rails.b.point(0.5)).z()};
+    MESSAGE(p.job->name, ": tip Ø", r.tip, " mm, top Ø", r.top, " mm, coverage ", p.fit.coverage,
+            ", lowest point within 0.02 mm: z ", low, " mm, intrusion ", run.fitted.frame.length_to_mm(p.fit.check_intrusion), " mm");
     CHECK(j["tool"]["constraints"]["met"] == true);
     CHECK(machinable(p.fit));
-    return std::make_pair(low, 2 * p.profile_mm.front().y());
-  };
-  const auto wide = lowest_reached("{shape: cone, max_diameter: 10}");
-  const auto narrow = lowest_reached("{shape: cone, max_diameter: 10, max_tip_diameter: 2}");
-  CHECK(narrow.second <= 2 + 1e-6);
-  CHECK(wide.first >= 2.0);
-  CHECK(narrow.first <= 1.25);
+    return r;
+  }
+  Reach lowest_reached(const std::string& tool, const std::string& patches) {
+    const pipeline::FitRun run =
+        fit_job_file(dir, "surface: flank.obj\npart: floor.obj\ntolerance: 0.02\ntool: " + tool + "\n" + patches);
+    REQUIRE(!run.fitted.patches.empty());
+    MESSAGE(tool, ": ", run.fitted.patches.size(), " patches");
+    return reach(run, run.fitted.patches[0]);
+  }
+};
+
+TEST_CASE("max_tip_diameter: a flat end beside a flank leaning over its floor reaches lower with a narrow tip" * doctest::test_suite("heavy")) {
+  // Measured: the Ø10 cylinder the fit takes reaches z 2.5 mm (78.8% of the flank); its tip at most
+  // Ø2 mm, the cone (Ø1.87 to Ø10) reaches z 1.0 mm (85.2%).
+  LeaningFlank f;
+  std::string patches = "patches:\n  - name: p\n    init: lines\n    lines:\n";
+  for (double y : {3.0, 30.0, 57.0}) {
+    const Eigen::Vector3d a = Eigen::Vector3d(0, y, 0) + 5 * f.n, b = a + 30 * f.up;
+    patches += fmt::format("      - [{}, {}, {}, {}, {}, {}]\n", a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
+  }
+  const auto wide = f.lowest_reached("{shape: cone, max_diameter: 10}", patches);
+  const auto narrow = f.lowest_reached("{shape: cone, max_diameter: 10, max_tip_diameter: 2}", patches);
+  CHECK(narrow.tip <= 2 + 1e-6);
+  CHECK(wide.lowest >= 2.0);
+  CHECK(narrow.lowest <= 1.25);
+}
+
+TEST_CASE("max_tip_diameter with patches: auto: detection holds the narrow tip at the floor, the tool widening above it" * doctest::test_suite("heavy")) {
+  // The same flank. Before, detection held the limit at both ends (it turned each tool by the part
+  // after its fit) and started from the seed's wide tool: no patch here, none on the HECC impeller.
+  // Measured: without the limit detection takes a Ø3.02 mm tip (dip 0.73 mm), the lowest row within
+  // 0.02 mm z 1.0 mm; with max_tip_diameter 2 a tip of Ø1.49 widening to Ø4.04 mm at the holder end
+  // (dip 0.36 mm), z 0.5 mm, 99.2% of the flank.
+  LeaningFlank f;
+  const std::string patches = "cover: {max_patches: 1}\npatches: auto\n";
+  const auto wide = f.lowest_reached("{max_diameter: 10}", patches);
+  const auto narrow = f.lowest_reached("{max_diameter: 10, max_tip_diameter: 2}", patches);
+  CHECK(wide.tip > 2.5);
+  CHECK(narrow.tip <= 2 + 1e-6);
+  CHECK(narrow.top >= 3);  // the limit holds at the tip alone
+  CHECK(narrow.tip_z < narrow.top_z - 10);  // the tip on the floor's side
+  CHECK(wide.lowest >= 1.0);
+  CHECK(narrow.lowest <= 0.5);
 }
 
 TEST_CASE("tool: {shared: true} gives two patches one identical meridian, each within the tolerance" * doctest::test_suite("heavy")) {
