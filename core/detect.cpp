@@ -24,6 +24,7 @@ std::string CoverOptions::validate() const {
   if (seed_points < 1) return "cover.seed_points: at least 1";
   if (directions < 1) return "cover.directions: at least 1";
   if (radii.empty()) return "cover.radii: at least one candidate radius";
+  if (!(floor_tip >= 0) || !std::isfinite(floor_tip)) return "cover.floor_tip_diameter: must be >= 0";
   for (double r : radii)
     if (!(r > 0) || !std::isfinite(r)) return "cover.radii: must be positive";
   if (explored_seeds < 1) return "cover.explored_seeds: at least 1";
@@ -710,6 +711,20 @@ PatchOptions candidate_options(const CoverOptions& o) {
 // no patch). So the tip end is chosen on the start motion, as it is after the fit: by the part
 // (holder_up with the start's own tool), without one by `up` (the spindle's side); the start is
 // turned so that its tip is the a end, and the fit holds the tip's limits there with that choice kept.
+// The a end (the tip) of each axis line tilted towards Φ, square to the axis, to within `radius`
+// of it: a start tool narrowing to its tip. A seed's or a fitted wide tool's axis lies at its
+// radius from Φ; the fit, started from that tool held narrow at its tip, stayed 0.5 mm off a plane.
+Rails tip_tilted(const SurfaceIndex& surface, Rails start, double radius) {
+  for (Eigen::Index i = 0; i < start.a.ctrl.rows(); ++i) {
+    const Eigen::Vector3d a = start.a.ctrl.row(i).transpose(), b = start.b.ctrl.row(i).transpose();
+    const Eigen::Vector3d e = (b - a).normalized();
+    Eigen::Vector3d v = a - surface.closest(a).point;
+    v -= v.dot(e) * e;
+    if (const double r = v.norm(); r > radius) start.a.ctrl.row(i) = (a - (1 - radius / r) * v).transpose();
+  }
+  return start;
+}
+
 bool tip_chosen_first(const CoverOptions& o) {
   const PatchOptions& p = o.patch;
   return !p.fit.fixed_tool && std::isfinite(p.fit.constraints.max_tip_radius) &&
@@ -723,17 +738,7 @@ Rails tip_first(const SurfaceIndex& surface, Rails start, const CoverOptions& o,
     up = holder_up(start, initial_tool(surface, start, po.fit), po.fit.check, 2 * po.fit.samples_t,
                    po.fit.check.up.value_or(up));
   if (axis.dot(up) < 0) std::swap(start.a, start.b);
-  // The seed's axis lies at one radius from Φ along its length: its tip end is tilted towards Φ to
-  // within the tip's radius (square to the axis), so that the start is a tool narrowing to its tip
-  // (the fit, started from the wide tool held narrow at its tip, stayed 0.5 mm off a plane).
-  const double tip = 0.9 * po.fit.constraints.max_tip_radius;
-  for (Eigen::Index i = 0; i < start.a.ctrl.rows(); ++i) {
-    const Eigen::Vector3d a = start.a.ctrl.row(i).transpose(), b = start.b.ctrl.row(i).transpose();
-    const Eigen::Vector3d e = (b - a).normalized();
-    Eigen::Vector3d v = a - surface.closest(a).point;
-    v -= v.dot(e) * e;
-    if (const double r = v.norm(); r > tip) start.a.ctrl.row(i) = (a - (1 - tip / r) * v).transpose();
-  }
+  start = tip_tilted(surface, std::move(start), 0.9 * po.fit.constraints.max_tip_radius);
   po.orient_by_part = false;
   po.fit.check.up = mean_axis(start);
   po.fit.constraints.either_end = false;
@@ -893,6 +898,20 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
     offer(std::move(pulled));
   } catch (const InputError&) {
     // the pulled motion left Φ: the patch as it was
+  }
+  const double narrow = o.floor_tip;
+  if (narrow > 0 && narrow < pull.fit.constraints.max_tip_radius && narrow >= pull.fit.constraints.min_tip_radius) {
+    PatchFit thin = f.fit;
+    PatchOptions held = pull;
+    held.fit.constraints.max_tip_radius = narrow;
+    try {
+      thin.fit = optimize_motion(surface, tip_tilted(surface, f.fit.fit.rails, 0.9 * narrow), held.fit);
+      thin.fit.eps_ini = f.fit.fit.eps_ini;
+      thin.fit.iterations += f.fit.fit.iterations;
+      offer(std::move(thin));
+    } catch (const InputError&) {
+      // the narrow tool's motion left Φ
+    }
   }
   if (!best.ok) return f;
   best.cut = f.cut;

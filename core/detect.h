@@ -77,6 +77,15 @@ struct CoverOptions {
   // search of an uncovered region (its patch is a candidate of the round, finished as its best).
   std::optional<ToolEnd> end;
   bool floor_pass = true;
+  // > 0 (unit frame, a radius): the floor pass also fits the round's best with its tip at most this
+  // wide (ToolConstraints::max_tip_radius; its axis's tip end tilted to within it first), pulled
+  // onto the floor, judged the same way; the three compete by the uncovered area they bring. Where a
+  // flank leans over its floor (the HECC impeller's pressure side meets its hub at 68-86°) a flat
+  // end square to an axis along the flank dips with the rim away from it and leaves its rim at the
+  // flank 2 r sin(90° − angle) above the floor (up to 3.7 mm for a Ø10 tip); a narrow tip reaches
+  // lower. Narrow tips on every candidate cost the rest of the flank (the impeller with tips of at
+  // most Ø3 mm: 46.4% at 5 patches, against 70% with Ø10).
+  double floor_tip = 0;
   PatchOptions patch;      // fit, exploration, propagation, machined surface, tolerance
   // Tool policy (issue 14). Default: one custom tool per patch, fitted with it.
   // patch.fit.fixed_tool set (a catalogue tool): every candidate's motion is fitted to that tool,

@@ -386,6 +386,7 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
   co.max_patches = job.cover->max_patches;
   co.exchanges = job.cover->exchanges;
   co.regions = job.cover->regions;
+  co.floor_tip = out.frame.length_to_unit(job.cover->floor_tip_diameter_mm / 2);
   co.patch.fit = fit;
   // With a part, every candidate patch is kept out of it (with_check: tip shortened, trimmed or refitted;
   // rejected when nothing stays clear), its holder at the end whose shank keeps out of the part (a
@@ -1059,6 +1060,7 @@ nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
           {"patches_exchanged", c.exchanged},
           {"regions", job.cover->regions},
           {"regions_searched", c.regions_searched},
+          {"floor_tip_diameter_mm", job.cover->floor_tip_diameter_mm},
           {"patches_from_regions", c.from_regions},
           {"patches_refused", refused_patches(f)},
           {"patches", f.patches.size()},

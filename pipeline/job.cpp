@@ -374,7 +374,7 @@ Job read_job(const std::filesystem::path& file) {
     CoverJob& c = job.cover.emplace();
     if (const YAML::Node cv = root["cover"]) {
       if (!cv.IsMap()) r.fail(cv, "cover", "expected {coverage: 0.95, max_patches: 8, exchanges: 3, regions: 2}");
-      r.only_keys(cv, "cover", {"coverage", "max_patches", "exchanges", "regions"});
+      r.only_keys(cv, "cover", {"coverage", "max_patches", "exchanges", "regions", "floor_tip_diameter"});
       if (cv["coverage"]) {
         c.coverage = r.number(cv["coverage"], "cover.coverage");
         if (!(c.coverage > 0 && c.coverage <= 1))
@@ -383,6 +383,16 @@ Job read_job(const std::filesystem::path& file) {
       if (cv["max_patches"]) c.max_patches = r.integer(cv["max_patches"], "cover.max_patches", 1, 32);
       if (cv["exchanges"]) c.exchanges = r.integer(cv["exchanges"], "cover.exchanges", 0, 16);
       if (cv["regions"]) c.regions = r.integer(cv["regions"], "cover.regions", 0, 8);
+      if (const YAML::Node f = cv["floor_tip_diameter"]) {
+        c.floor_tip_diameter_mm = in_range(r, f, "cover.floor_tip_diameter", 1e-3, max_length_mm, "mm");
+        if (!job.part_given) r.fail(f, "cover.floor_tip_diameter", "needs part: (the floor the tips stand on)");
+        if (c.floor_tip_diameter_mm >= std::min(job.tool.max_tip_diameter_mm, job.tool.max_diameter_mm))
+          r.fail(f, "cover.floor_tip_diameter", fmt::format("{} mm is not narrower than the tool's tip may be (tool.max_diameter, tool.max_tip_diameter)", c.floor_tip_diameter_mm));
+        if (c.floor_tip_diameter_mm < std::max(job.tool.min_tip_diameter_mm, job.tool.min_diameter_mm))
+          r.fail(f, "cover.floor_tip_diameter", fmt::format("{} mm is narrower than tool.min_diameter or tool.min_tip_diameter", c.floor_tip_diameter_mm));
+        if (job.tool.end.kind != EndKind::Flat)
+          r.fail(f, "cover.floor_tip_diameter", "only with a flat end (tool.end)");
+      }
     }
     return job;
   }

@@ -54,6 +54,7 @@ struct CoverJob {
   int max_patches = 8;     // 1 .. 32
   int exchanges = 3;       // 0 .. 16: rounds at max_patches that try to replace the weakest patch
   int regions = 2;         // 0 .. 8: uncovered regions per round searched as surfaces of their own (CoverOptions::regions)
+  double floor_tip_diameter_mm = 0;  // > 0: the floor pass also fits each round's best with a tip this narrow (CoverOptions::floor_tip)
 };
 
 // `tool:` beyond shape and control points (mm, deg): limits on a custom tool, enforced in the fit;

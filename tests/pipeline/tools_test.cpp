@@ -224,6 +224,27 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
     CHECK(msg.find(dir.file("job.yaml") + ":1: ") != std::string::npos);
     CHECK(msg.find("not with patches: auto") != std::string::npos);
   }
+  // The floor pass's narrow tip: a part to stand on, narrower than the tool may be, a flat end.
+  const struct {
+    const char* job;
+    const char* expect;
+  } floor_tips[] = {
+      {"cover: {floor_tip_diameter: 2}\nsurface: s.obj\n", ":1: cover.floor_tip_diameter: needs part:"},
+      {"cover: {floor_tip_diameter: 0}\nsurface: s.obj\npart: s.obj\n", ":1: cover.floor_tip_diameter: must be in 0.001"},
+      {"cover: {floor_tip_diameter: 10}\nsurface: s.obj\npart: s.obj\ntool: {max_diameter: 10}\n",
+       ":1: cover.floor_tip_diameter: 10 mm is not narrower than the tool's tip may be"},
+      {"cover: {floor_tip_diameter: 2}\nsurface: s.obj\npart: s.obj\ntool: {min_diameter: 3}\n",
+       ":1: cover.floor_tip_diameter: 2 mm is narrower than tool.min_diameter or tool.min_tip_diameter"},
+      {"cover: {floor_tip_diameter: 2}\nsurface: s.obj\npart: s.obj\ntool: {end: ball}\n", ":1: cover.floor_tip_diameter: only with a flat end"},
+  };
+  for (const auto& c : floor_tips) {
+    CAPTURE(c.job);
+    const std::string msg = tools_error_of(dir, std::string(c.job) + "patches: auto\n");
+    CAPTURE(msg);
+    CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
+  }
+  test::write_text(dir.file("job.yaml"), "cover: {floor_tip_diameter: 2}\nsurface: s.obj\npart: s.obj\npatches: auto\n");
+  CHECK(pipeline::read_job(dir.file("job.yaml")).cover->floor_tip_diameter_mm == 2);
   // Passes with patches: auto end on the design surface (detection fits Φ itself).
   const std::string stock = tools_error_of(dir, "passes: [{allowance: 0}, {allowance: 0.2}]\nsurface: s.obj\npatches: auto\n");
   CHECK(stock.find(dir.file("job.yaml") + ":1: passes: with patches: auto the last pass must have allowance 0") !=
@@ -440,6 +461,17 @@ TEST_CASE("max_tip_diameter with patches: auto: detection holds the narrow tip a
   CHECK(narrow.top >= 3);  // the limit holds at the tip alone
   CHECK(narrow.tip_z < narrow.top_z - 10);  // the tip on the floor's side
   CHECK(wide.lowest >= 1.0);
+  CHECK(narrow.lowest <= 0.5);
+}
+
+TEST_CASE("cover.floor_tip_diameter: the floor pass also tries each round's best with a narrow tip, and keeps it where it reaches lower" * doctest::test_suite("heavy")) {
+  // The same flank, no limit on the tip: detection's own Ø3.02 mm tip reaches z 1.0 mm (97.5%); the
+  // floor pass's narrow variant (at most Ø1.5 mm, pulled onto the floor) brings more and is the patch.
+  LeaningFlank f;
+  const auto narrow = f.lowest_reached("{max_diameter: 10}", "cover: {max_patches: 1, floor_tip_diameter: 1.5}\npatches: auto\n");
+  CHECK(narrow.tip <= 1.5 + 1e-6);
+  CHECK(narrow.top > 2);
+  CHECK(narrow.tip_z < narrow.top_z - 10);
   CHECK(narrow.lowest <= 0.5);
 }
 
