@@ -705,12 +705,6 @@ PatchOptions candidate_options(const CoverOptions& o) {
   return po;
 }
 
-// A tip narrower than the tool (ToolConstraints::max_tip_radius) is held at the tip alone: the tool
-// widens towards its holder. Held at both ends (either_end: detection turns a tool after its fit) it
-// made lenses, narrow at both ends, that fitted nothing (the HECC impeller with max_tip_diameter 4:
-// no patch). So the tip end is chosen on the start motion, as it is after the fit: by the part
-// (holder_up with the start's own tool), without one by `up` (the spindle's side); the start is
-// turned so that its tip is the a end, and the fit holds the tip's limits there with that choice kept.
 // The a end (the tip) of each axis line tilted towards Φ, square to the axis, to within `radius`
 // of it: a start tool narrowing to its tip. A seed's or a fitted wide tool's axis lies at its
 // radius from Φ; the fit, started from that tool held narrow at its tip, stayed 0.5 mm off a plane.
@@ -725,10 +719,24 @@ Rails tip_tilted(const SurfaceIndex& surface, Rails start, double radius) {
   return start;
 }
 
+// A tip narrower than the tool (ToolConstraints::max_tip_radius) is held at the tip alone: the tool
+// widens towards its holder. Held at both ends (either_end: detection turns a tool after its fit) it
+// made lenses, narrow at both ends, that fitted nothing (the HECC impeller with max_tip_diameter 4:
+// no patch). So the tip end is chosen on the start motion, as it is after the fit: by the part
+// (holder_up with the start's own tool), without one by `up` (the spindle's side); the start is
+// turned so that its tip is the a end, and the fit holds the tip's limits there with that choice kept.
 bool tip_chosen_first(const CoverOptions& o) {
   const PatchOptions& p = o.patch;
   return !p.fit.fixed_tool && std::isfinite(p.fit.constraints.max_tip_radius) &&
          (p.fit.check.part ? p.orient_by_part : o.up.has_value());
+}
+
+// The options that keep a motion's tip at its a end (a start turned by tip_first, or a fit of one):
+// the part does not turn it, the tip's limits hold there alone.
+void tip_held_at_a(PatchOptions& po, const Rails& rails) {
+  po.orient_by_part = false;
+  po.fit.check.up = mean_axis(rails);
+  po.fit.constraints.either_end = false;
 }
 
 Rails tip_first(const SurfaceIndex& surface, Rails start, const CoverOptions& o, PatchOptions& po) {
@@ -739,9 +747,7 @@ Rails tip_first(const SurfaceIndex& surface, Rails start, const CoverOptions& o,
                    po.fit.check.up.value_or(up));
   if (axis.dot(up) < 0) std::swap(start.a, start.b);
   start = tip_tilted(surface, std::move(start), 0.9 * po.fit.constraints.max_tip_radius);
-  po.orient_by_part = false;
-  po.fit.check.up = mean_axis(start);
-  po.fit.constraints.either_end = false;
+  tip_held_at_a(po, start);
   return start;
 }
 
@@ -798,9 +804,10 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
         const ToolCut cut = tip_at_a ? cut_tool(fitted.rails, fitted.tool, c, 1) : cut_tool(fitted.rails, fitted.tool, 0, 1 - c);
         PatchFit p;
         p.trajectory = out.fit.trajectory;
-        p.initial = cut.rails;
+        // What stays of a tool widening towards its holder is wide at its new tip: tilted as a start.
+        p.initial = tip_chosen_first(o) ? tip_tilted(surface, cut.rails, 0.9 * po.fit.constraints.max_tip_radius) : cut.rails;
         try {
-          p.fit = optimize_motion(surface, cut.rails, po.fit);
+          p.fit = optimize_motion(surface, p.initial, po.fit);
         } catch (const InputError&) {
           continue;  // what stays of the axis left Φ
         }
@@ -877,9 +884,7 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
   PatchOptions po = candidate_options(o);
   po.machined.end = o.end;
   // with_check has turned the fit so that its tip is the a end: kept so, the tip's limits held there.
-  po.orient_by_part = false;
-  po.fit.check.up = mean_axis(f.fit.fit.rails);
-  po.fit.constraints.either_end = false;
+  tip_held_at_a(po, f.fit.fit.rails);
   Fitted best;
   const auto offer = [&](PatchFit p) {
     std::optional<PatchFit> j = judged(surface, std::move(p), po);
@@ -904,8 +909,10 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
     PatchFit thin = f.fit;
     PatchOptions held = pull;
     held.fit.constraints.max_tip_radius = narrow;
+    // Judged with the tool's own limits (po): where the part has the tip ground shorter it widens.
+    thin.initial = tip_tilted(surface, f.fit.fit.rails, 0.9 * narrow);
     try {
-      thin.fit = optimize_motion(surface, tip_tilted(surface, f.fit.fit.rails, 0.9 * narrow), held.fit);
+      thin.fit = optimize_motion(surface, thin.initial, held.fit);
       thin.fit.eps_ini = f.fit.fit.eps_ini;
       thin.fit.iterations += f.fit.fit.iterations;
       offer(std::move(thin));
@@ -1252,7 +1259,9 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
           const PatchFit& found = d.patches.front().fit;
           // As fitted on the region, and refitted on Φ from its motion.
           Fitted as_is;
-          std::optional<PatchFit> j = judged(surface, found, candidate_options(o));
+          PatchOptions as_found = candidate_options(o);
+          if (tip_chosen_first(o)) tip_held_at_a(as_found, found.fit.rails);  // its narrow tip at a, where it was fitted
+          std::optional<PatchFit> j = judged(surface, found, as_found);
           if (j) as_is.fit = std::move(*j);
           if (j && machinable(as_is.fit)) as_is.ok = true, as_is.gain = as_is.whole_gain = gain_of(as_is.fit, covered, area, tol);
           report(name + ": refitting its patch on the whole surface");
@@ -1364,6 +1373,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     po.trim_gouges = true;
     po.solid_cutter_on_phi = true;  // motions continued past Φ's ends among them
     po.orient_by_part = false;
+    if (tip_chosen_first(o)) po.fit.constraints.either_end = false;  // held tools stand with their tip at a
     std::vector<FitResult> joint;
     for (const Chosen& c : chosen) joint.push_back(c.fit.fit);
     std::vector<PatchFit> refit;

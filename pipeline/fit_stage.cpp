@@ -1051,7 +1051,7 @@ nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
   const CoverResult& c = *f.cover;
   int uncut = 0;
   for (double d : c.deviation_mm) uncut += std::isfinite(d) ? 0 : 1;
-  return {{"note", "patches: auto; the whole design surface against the union of the detected patches' machined "
+  nlohmann::ordered_json out = {{"note", "patches: auto; the whole design surface against the union of the detected patches' machined "
                    "surfaces: coverage is the share of its area within the tolerance"},
           {"coverage", c.coverage},
           {"target_coverage", job.cover->coverage},
@@ -1060,7 +1060,6 @@ nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
           {"patches_exchanged", c.exchanged},
           {"regions", job.cover->regions},
           {"regions_searched", c.regions_searched},
-          {"floor_tip_diameter_mm", job.cover->floor_tip_diameter_mm},
           {"patches_from_regions", c.from_regions},
           {"patches_refused", refused_patches(f)},
           {"patches", f.patches.size()},
@@ -1071,6 +1070,8 @@ nlohmann::ordered_json cover_report(const Job& job, const FittedJob& f) {
           {"trajectories_fitted", c.seeds_tried},
           {"tool", tool_policy_report(job, c)},
           {"detected_job", detected_job_name}};
+  if (job.cover->floor_tip_diameter_mm > 0) out["floor_tip_diameter_mm"] = job.cover->floor_tip_diameter_mm;
+  return out;
 }
 
 namespace {
@@ -1090,6 +1091,10 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
       "# The patches flankcam detected for {} (patches: auto, {}), written out as init: lines.\n"
       "# `flankcam fit` or `flankcam run` of this file fits them again from these lines. Lengths in mm.\n",
       job.file.filename().string(), cover_summary(job, f));
+  if (job.cover && job.cover->floor_tip_diameter_mm > 0)
+    y += fmt::format("# cover.floor_tip_diameter {} mm narrowed some tips in detection; it is no limit of this job, and\n"
+                     "# such a patch fitted again from its lines may widen its tip (tool.max_tip_diameter holds every patch).\n",
+                     num(job.cover->floor_tip_diameter_mm));
   y += "surface: " + file_key(job.surface, job.surface_faces, job.surface_deflection_mm) + "\n";
   if (job.part_given) y += "part: " + file_key(job.part, {}, job.part_deflection_mm) + "\n";
   if (job.check_tolerance_mm) y += fmt::format("check_tolerance: {}\n", num(*job.check_tolerance_mm));
@@ -1114,6 +1119,7 @@ std::string detected_job_yaml(const Job& job, const FittedJob& f) {
     if (std::isfinite(t.max_diameter_mm)) extra += ", max_diameter: " + num(t.max_diameter_mm);
     if (std::isfinite(t.max_length_mm)) extra += ", max_length: " + num(t.max_length_mm);
     if (t.min_tip_diameter_mm > 0) extra += ", min_tip_diameter: " + num(t.min_tip_diameter_mm);
+    if (std::isfinite(t.max_tip_diameter_mm)) extra += ", max_tip_diameter: " + num(t.max_tip_diameter_mm);
     if (t.max_cone_angle_deg < 90) extra += ", max_cone_angle: " + num(t.max_cone_angle_deg);
     if (t.convex) extra += ", convex: true";
     if (t.shared) extra += ", shared: true";

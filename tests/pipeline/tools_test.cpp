@@ -393,6 +393,7 @@ TEST_CASE("a corner end larger than the free fit's tip allows is held in the fit
 struct LeaningFlank {
   test::ScratchDir dir{"max-tip"};
   Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
+  std::string detected;  // the last run's detected-job.yaml (patches: auto)
   LeaningFlank() {
     write_obj(dir.file("flank.obj"), test::grid_mesh(41, 61, [](int j, int k) { return Eigen::Vector3d(0.125 * k, 1.5 * j, 0.5 * k); }));
     write_obj(dir.file("floor.obj"), test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4));
@@ -426,6 +427,7 @@ struct LeaningFlank {
         fit_job_file(dir, "surface: flank.obj\npart: floor.obj\ntolerance: 0.02\ntool: " + tool + "\n" + patches);
     REQUIRE(!run.fitted.patches.empty());
     MESSAGE(tool, ": ", run.fitted.patches.size(), " patches");
+    detected = run.fitted.cover ? pipeline::detected_job_yaml(run.job, run.fitted) : "";
     return reach(run, run.fitted.patches[0]);
   }
 };
@@ -462,6 +464,7 @@ TEST_CASE("max_tip_diameter with patches: auto: detection holds the narrow tip a
   CHECK(narrow.tip_z < narrow.top_z - 10);  // the tip on the floor's side
   CHECK(wide.lowest >= 1.0);
   CHECK(narrow.lowest <= 0.5);
+  CHECK(f.detected.find("max_tip_diameter: 2") != std::string::npos);  // the detected job keeps the limit
 }
 
 TEST_CASE("cover.floor_tip_diameter: the floor pass also tries each round's best with a narrow tip, and keeps it where it reaches lower" * doctest::test_suite("heavy")) {
@@ -473,6 +476,7 @@ TEST_CASE("cover.floor_tip_diameter: the floor pass also tries each round's best
   CHECK(narrow.top > 2);
   CHECK(narrow.tip_z < narrow.top_z - 10);
   CHECK(narrow.lowest <= 0.5);
+  CHECK(f.detected.find("# cover.floor_tip_diameter 1.5 mm narrowed some tips") != std::string::npos);
 }
 
 TEST_CASE("tool: {shared: true} gives two patches one identical meridian, each within the tolerance" * doctest::test_suite("heavy")) {
