@@ -907,6 +907,7 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
   const double narrow = o.floor_tip;
   if (narrow > 0 && narrow < pull.fit.constraints.max_tip_radius && narrow >= pull.fit.constraints.min_tip_radius) {
     PatchFit thin = f.fit;
+    thin.tip_shortened = thin.holder_lengthened = 0;  // a tool of its own, fitted on the axis as it stands
     PatchOptions held = pull;
     held.fit.constraints.max_tip_radius = narrow;
     // Judged with the tool's own limits (po): where the part has the tip ground shorter it widens.
