@@ -211,12 +211,13 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
       {"allowance: 0.1\npasses: [{allowance: 0}]", ":1: allowance: not with passes:"},
       {"tool: {max_diameter: 10, end: {corner: 6}}", ":1: tool.end.corner: 6 mm does not fit a tool of tool.max_diameter 10 mm"},
   };
-  for (const auto& c : cases) {
-    CAPTURE(c.tool);
-    const std::string msg = tools_error_of(dir, std::string(c.tool) + "\n" + rest);
+  const auto expect_error = [&](const std::string& yaml, const char* expect) {
+    CAPTURE(yaml);
+    const std::string msg = tools_error_of(dir, yaml);
     CAPTURE(msg);
-    CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
-  }
+    CHECK(msg.find(dir.file("job.yaml") + expect) != std::string::npos);
+  };
+  for (const auto& c : cases) expect_error(std::string(c.tool) + "\n" + rest, c.expect);
   for (const char* key : {"allowance: 0.2", "tool: {catalogue: cyl-d6-l20}", "tool: {catalogue: cyl-d6-l20, shared: true}"}) {
     CAPTURE(key);
     const std::string msg = tools_error_of(dir, std::string(key) + "\nsurface: s.obj\npatches: auto\n");
@@ -225,10 +226,7 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
     CHECK(msg.find("not with patches: auto") != std::string::npos);
   }
   // The floor pass's narrow tip: a part to stand on, narrower than the tool may be, a flat end.
-  const struct {
-    const char* job;
-    const char* expect;
-  } floor_tips[] = {
+  const std::pair<const char*, const char*> floor_tips[] = {
       {"cover: {floor_tip_diameter: 2}\nsurface: s.obj\n", ":1: cover.floor_tip_diameter: needs part:"},
       {"cover: {floor_tip_diameter: 0}\nsurface: s.obj\npart: s.obj\n", ":1: cover.floor_tip_diameter: must be in 0.001"},
       {"cover: {floor_tip_diameter: 10}\nsurface: s.obj\npart: s.obj\ntool: {max_diameter: 10}\n",
@@ -237,12 +235,7 @@ TEST_CASE("tool keys in a job: limits, catalogue and shared are checked with fil
        ":1: cover.floor_tip_diameter: 2 mm is narrower than tool.min_diameter or tool.min_tip_diameter"},
       {"cover: {floor_tip_diameter: 2}\nsurface: s.obj\npart: s.obj\ntool: {end: ball}\n", ":1: cover.floor_tip_diameter: only with a flat end"},
   };
-  for (const auto& c : floor_tips) {
-    CAPTURE(c.job);
-    const std::string msg = tools_error_of(dir, std::string(c.job) + "patches: auto\n");
-    CAPTURE(msg);
-    CHECK(msg.find(dir.file("job.yaml") + c.expect) != std::string::npos);
-  }
+  for (const auto& [job, expect] : floor_tips) expect_error(std::string(job) + "patches: auto\n", expect);
   test::write_text(dir.file("job.yaml"), "cover: {floor_tip_diameter: 2}\nsurface: s.obj\npart: s.obj\npatches: auto\n");
   CHECK(pipeline::read_job(dir.file("job.yaml")).cover->floor_tip_diameter_mm == 2);
   // Passes with patches: auto end on the design surface (detection fits Φ itself).
