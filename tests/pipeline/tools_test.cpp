@@ -447,15 +447,12 @@ TEST_CASE("max_tip_diameter with patches: auto: detection holds the narrow tip a
   // Measured: without the limit detection takes a Ø3.02 mm tip (dip 0.73 mm), the lowest row within
   // 0.02 mm z 1.0 mm; with max_tip_diameter 2 a tip of Ø1.49 widening to Ø4.04 mm at the holder end
   // (dip 0.36 mm), z 0.5 mm, 99.2% of the flank.
+  // (The run without the limit is not repeated here: CI's time.)
   LeaningFlank f;
-  const std::string patches = "cover: {max_patches: 1}\npatches: auto\n";
-  const auto wide = f.lowest_reached("{max_diameter: 10}", patches);
-  const auto narrow = f.lowest_reached("{max_diameter: 10, max_tip_diameter: 2}", patches);
-  CHECK(wide.tip > 2.5);
+  const auto narrow = f.lowest_reached("{max_diameter: 10, max_tip_diameter: 2}", "cover: {max_patches: 1}\npatches: auto\n");
   CHECK(narrow.tip <= 2 + 1e-6);
   CHECK(narrow.top >= 3);  // the limit holds at the tip alone
   CHECK(narrow.tip_z < narrow.top_z - 10);  // the tip on the floor's side
-  CHECK(wide.lowest >= 1.0);
   CHECK(narrow.lowest <= 0.5);
   CHECK(f.detected.find("max_tip_diameter: 2") != std::string::npos);  // the detected job keeps the limit
 }
