@@ -877,8 +877,8 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
 
 // The floor pass (CoverOptions::end): the round's best judged again with the tool's end swept, and
 // fitted again from its motion with the tip pulled onto the part's floor (its tool free), judged so
-// too; the one that brings more uncovered area is kept. A held tool (catalogue or shared) is left as
-// it is.
+// too; with CoverOptions::floor_tip also with a narrow tip, pulled so; the one that brings most
+// uncovered area is kept. A held tool (catalogue or shared) is left as it is.
 Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<char>& covered, const std::vector<double>& area,
                       const CoverOptions& o) {
   PatchOptions po = candidate_options(o);
@@ -892,34 +892,32 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
     const double g = gain_of(*j, covered, area, po.tolerance);
     if (!best.ok || g > best.gain) best.fit = std::move(*j), best.gain = g, best.ok = true;
   };
+  // `p` fitted again from `start` with `fit` (its iterations counted on f's) and offered; a motion
+  // that leaves Φ is no variant.
+  const auto refit = [&](PatchFit p, const Rails& start, const FitOptions& fit) {
+    try {
+      p.fit = optimize_motion(surface, start, fit);
+    } catch (const InputError&) {
+      return;
+    }
+    p.fit.eps_ini = f.fit.fit.eps_ini;
+    p.fit.iterations += f.fit.fit.iterations;
+    offer(std::move(p));
+  };
   offer(f.fit);
-  PatchFit pulled = f.fit;
   PatchOptions pull = po;
   pull.fit.check.floor_reach = o.patch.fit.check.floor_reach;
-  try {
-    pulled.fit = optimize_motion(surface, f.fit.fit.rails, pull.fit);
-    pulled.fit.eps_ini = f.fit.fit.eps_ini;
-    pulled.fit.iterations += f.fit.fit.iterations;
-    offer(std::move(pulled));
-  } catch (const InputError&) {
-    // the pulled motion left Φ: the patch as it was
-  }
+  refit(f.fit, f.fit.fit.rails, pull.fit);
   const double narrow = o.floor_tip;
   if (narrow > 0 && narrow < pull.fit.constraints.max_tip_radius && narrow >= pull.fit.constraints.min_tip_radius) {
     PatchFit thin = f.fit;
     thin.tip_shortened = thin.holder_lengthened = 0;  // a tool of its own, fitted on the axis as it stands
-    PatchOptions held = pull;
-    held.fit.constraints.max_tip_radius = narrow;
+    const Rails start = tip_tilted(surface, f.fit.fit.rails, 0.9 * narrow);
+    thin.initial = start;
+    FitOptions held = pull.fit;
+    held.constraints.max_tip_radius = narrow;
     // Judged with the tool's own limits (po): where the part has the tip ground shorter it widens.
-    thin.initial = tip_tilted(surface, f.fit.fit.rails, 0.9 * narrow);
-    try {
-      thin.fit = optimize_motion(surface, thin.initial, held.fit);
-      thin.fit.eps_ini = f.fit.fit.eps_ini;
-      thin.fit.iterations += f.fit.fit.iterations;
-      offer(std::move(thin));
-    } catch (const InputError&) {
-      // the narrow tool's motion left Φ
-    }
+    refit(std::move(thin), start, held);
   }
   if (!best.ok) return f;
   best.cut = f.cut;
