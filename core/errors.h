@@ -16,4 +16,10 @@ struct MachineError : InputError {
   using InputError::InputError;
 };
 
+// No program can be written: its motions collide or gouge, or detection found no patch to machine
+// (the CLI exits with 4).
+struct ProgramRefused : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
 }  // namespace flankcam

@@ -624,6 +624,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
   };
   if (job.cover) {
     detect_job(job, index, fit_options(), catalogue ? catalogue->second : 0.0, out, progress);
+    require_detected_patch(job, out);
     // passes: the detected patches are fitted to Φ itself (the last pass, allowance 0); their tools
     // stand on the side of their lines.
     if (job.passes_mm.size() > 1)
@@ -1030,6 +1031,14 @@ std::string cover_summary(const Job& job, const FittedJob& f) {
                      f.cover->exchanged > 0 ? fmt::format("; {} exchanged for better", f.cover->exchanged) : "",
                      f.cover->from_regions > 0 ? fmt::format("; {} found in uncovered regions searched alone", f.cover->from_regions) : "",
                      refused > 0 ? fmt::format("; {} refused for collisions, not counted", refused) : "");
+}
+
+void require_detected_patch(const Job& job, const FittedJob& f) {
+  if (!f.cover || !f.patches.empty()) return;
+  throw ProgramRefused(fmt::format(
+      "patches: auto: no patch machines any of the surface within {} mm ({} candidate motions fitted); nothing written: a larger "
+      "tolerance, looser tool limits or patches listed by hand (init: lines) may find one",
+      job.tolerance_mm, f.cover->seeds_tried));
 }
 
 namespace {

@@ -94,6 +94,10 @@ struct FittedJob {
 
 // "whole surface: N patches[, one shared tool], C% within T mm (stopped: REASON)"; empty without `patches: auto`.
 [[nodiscard]] std::string cover_summary(const Job& job, const FittedJob& fitted);
+// `patches: auto` that found no patch: nothing to machine. Throws ProgramRefused ("patches: auto: no
+// patch machines any of the surface within T mm (N candidate motions fitted); nothing written: ...") before
+// any file is written; does nothing when a patch was found or the patches are listed.
+void require_detected_patch(const Job& job, const FittedJob& fitted);
 // The patch's tool as tables name it: the catalogue name, or the fitted shape ("general",
 // "cone", ...; "shared" added when one tool serves every patch).
 [[nodiscard]] std::string tool_label(const Job& job, const FittedPatch& p);

@@ -10,12 +10,12 @@
 #pragma once
 #include <Eigen/Core>
 #include <array>
-#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "core/closest_point.h"
 #include "core/collision.h"
+#include "core/errors.h"
 #include "kinematics/machine.h"
 #include "postproc/apt.h"
 #include "postproc/gcode.h"
@@ -136,11 +136,6 @@ struct VerifyReport {
   // "FILE:LINE: holder collision 1.234 mm deep at (x, y, z) in motion block B (rapid); ..." for the
   // first line that hits the part or leaves the CL-data (its deepest hit), or "".
   [[nodiscard]] std::string first_problem(const std::string& file) const;
-};
-
-// Refusal of a program whose motions collide or gouge (the CLI exits with 4).
-struct ProgramRefused : std::runtime_error {
-  using std::runtime_error::runtime_error;
 };
 
 // The program's dialect from its file name: .nc iso, .ngc linuxcnc, .h heidenhain, .mpf sinumerik;

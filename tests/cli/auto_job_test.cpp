@@ -95,6 +95,22 @@ TEST_CASE("patches: auto job errors name the file, line and key and write nothin
   }
 }
 
+TEST_CASE("patches: auto that finds no patch: fit and run exit 4 with one line and write nothing") {
+  // One triangle: no seed line fits, so detection has no patch. Before, fit and run wrote a report of
+  // "0 patches" and exited 0, as if the surface had been machined.
+  test::ScratchDir dir("auto-none");
+  test::write_text(dir.file("s.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+  test::write_text(dir.file("job.yaml"), "surface: s.obj\ntolerance: 0.01\nmachine: xyzac-trt\npatches: auto\n");
+  for (const char* command : {"fit", "run"}) {
+    CAPTURE(command);
+    const auto r = test::run_flankcam(std::string(command) + " " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
+    CHECK(r.code == 4);
+    CHECK(r.err.find("flankcam: refused: patches: auto: no patch machines any of the surface within 0.01 mm (0 candidate "
+                     "motions fitted); nothing written") != std::string::npos);
+    CHECK_FALSE(std::filesystem::exists(dir.file("out")));
+  }
+}
+
 TEST_CASE("flankcam run of examples/auto posts the detected patch and reports the whole surface" * doctest::test_suite("heavy")) {
   test::ScratchDir dir("auto-run");
   const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/auto/job.yaml";
