@@ -911,13 +911,21 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
   const double narrow = o.floor_tip;
   if (narrow > 0 && narrow < pull.fit.constraints.max_tip_radius && narrow >= pull.fit.constraints.min_tip_radius) {
     PatchFit thin = f.fit;
-    thin.tip_shortened = thin.holder_lengthened = 0;  // a tool of its own, fitted on the axis as it stands
+    thin.clear_part_adjustments();  // a tool of its own, fitted on the axis as it stands
     const Rails start = tip_tilted(surface, f.fit.fit.rails, 0.9 * narrow);
     thin.initial = start;
     FitOptions held = pull.fit;
     held.constraints.max_tip_radius = narrow;
     // Judged with the tool's own limits (po): where the part has the tip ground shorter it widens.
     refit(std::move(thin), start, held);
+  }
+  // The winner's cutter made longer at its tip (lengthened_at_tip) by 5%, 10% and 20% of its length:
+  // a tip that stops short of the floor (rotor 37's hub rows, 1-3 mm of flank left under tips that
+  // kept clear) reaches down to it, and with_check grinds back what would meet the part.
+  if (best.ok) {
+    const PatchFit winner = best.fit;
+    for (const double g : {0.05, 0.1, 0.2})
+      if (std::optional<PatchFit> l = lengthened_at_tip(winner, po, g * winner.fit.rails.length)) offer(std::move(*l));
   }
   if (!best.ok) return f;
   best.cut = f.cut;
@@ -1381,8 +1389,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       for (size_t k = 0; k < chosen.size(); ++k) {
         PatchFit f = chosen[k].fit;
         f.fit = std::move(joint[k]);
-        f.tip_shortened = 0;
-        f.holder_lengthened = 0;
+        f.clear_part_adjustments();
         f = po.fit.check.part ? with_check(surface, std::move(f), po) : machine_and_trim(surface, std::move(f), po);
         if (!machinable(f)) break;
         // What is kept, in the first motion's t as before (a continued motion reaches beyond [0, 1]).

@@ -198,7 +198,11 @@ ToolCut cut_tool(const Rails& r, const ToolRadius& tool, double lo, double hi) {
     const int K = int(tool.D.size()), samples = 16 * K;
     const std::vector<double> ss = uniform_parameters(samples);
     Eigen::MatrixXd P(samples, 1);
-    for (int i = 0; i < samples; ++i) P(i, 0) = tool.d(lo + (hi - lo) * ss[size_t(i)]);
+    // Below the tip (lo < 0: the cutter made longer there) the meridian goes on along its slope at
+    // the tip; the spline itself would hold the tip's radius.
+    const double h = 1e-4, slope = (tool.d(h) - tool.d(0)) / h;
+    const auto radius = [&](double s) { return s < 0 ? tool.d(0) + s * slope : tool.d(s); };
+    for (int i = 0; i < samples; ++i) P(i, 0) = radius(lo + (hi - lo) * ss[size_t(i)]);
     const BSpline f = fit_bspline(P, ss, K);
     out.tool.D.assign(f.ctrl.data(), f.ctrl.data() + K);
     for (int i = 0; i < samples; ++i) out.radius_error = std::max(out.radius_error, std::abs(out.tool.d(ss[size_t(i)]) - P(i, 0)));
@@ -321,6 +325,18 @@ std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOp
 }
 
 }  // namespace
+
+std::optional<PatchFit> lengthened_at_tip(const PatchFit& base, const PatchOptions& o, double e) {
+  const Rails& r = base.fit.rails;
+  if (o.fit.fixed_tool || !(e > 0) || !tip_is_a(r, o.fit.check)) return std::nullopt;
+  ToolCut longer = cut_tool(r, base.fit.tool, -e / r.length, 1);
+  if (!admissible_cut(longer, o) || !(longer.tool.d(0) > 0)) return std::nullopt;
+  PatchFit out = base;
+  out.fit.rails = std::move(longer.rails);
+  out.fit.tool = std::move(longer.tool);
+  out.clear_part_adjustments();
+  return out;
+}
 
 PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOptions& options) {
   if (!options.fit.check.part) return machine_and_trim(surface, std::move(plain), options);

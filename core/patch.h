@@ -74,6 +74,9 @@ struct PatchFit {
   bool check_refused = false;
   double tip_shortened = 0;  // length ground off the cutter's tip end to keep it out of the part (unit frame)
   double holder_lengthened = 0;  // length added to the cutter at its holder end to keep the shank clear (unit frame)
+  // A tool and motion of their own as they stand (refitted, shared, lengthened at the tip): nothing
+  // of them was ground off or lengthened to keep out of the part.
+  void clear_part_adjustments() { tip_shortened = holder_lengthened = 0; }
   std::optional<ExploredLine> explored;     // line-driven only
   std::optional<LineTrajectory> trajectory;  // line-driven only
 };
@@ -109,6 +112,14 @@ struct ToolCut {
   double radius_error = 0;
 };
 [[nodiscard]] ToolCut cut_tool(const Rails& rails, const ToolRadius& tool, double lo, double hi);
+
+// The cutter made longer at its tip by `e` (unit frame), the tip at the rails' a end (as with_check
+// and detection's floor pass turn it; by CheckSurface::up): the axis continued beyond a, the
+// meridian along its slope there (exact for cylinders and cones), so that a tip stopping above a
+// floor reaches down to it; with_check then grinds off what meets the part. Untrimmed and
+// unmachined; none for a fixed tool, a tip at b, or when the longer tool is no tool (tool_defect, a
+// tip radius not above 0) or breaks its limits.
+[[nodiscard]] std::optional<PatchFit> lengthened_at_tip(const PatchFit& base, const PatchOptions& o, double e);
 
 // The rails restricted to [t0, t1], reparametrised to [0, 1] (same control point count).
 [[nodiscard]] Rails trimmed(const Rails& rails, double t0, double t1);

@@ -369,8 +369,7 @@ void share_tool(const Job& job, const std::vector<const SurfaceIndex*>& targets,
   for (size_t k = 0; k < fits.size(); ++k) {
     FittedPatch& fp = out.patches[k];
     fp.fit.fit = std::move(fits[k]);
-    fp.fit.tip_shortened = 0;
-    fp.fit.holder_lengthened = 0;
+    fp.fit.clear_part_adjustments();
     fp.fit = machine_and_trim(*targets[k], std::move(fp.fit), options[k]);
     report_fit(job, out, fp, progress);
   }

@@ -55,6 +55,14 @@ struct Setup {
     po.tolerance = fr.length_to_unit(0.01);
     return po;
   }
+  // patch_options() over a hub: the cutter within 0.005 mm of it, the shank and holder of body().
+  PatchOptions over_hub(const SurfaceIndex& hub) const {
+    PatchOptions po = patch_options();
+    po.fit.check.part = &hub;
+    po.fit.check.tolerance = fr.length_to_unit(0.005);
+    po.fit.check.body = body();
+    return po;
+  }
   // patch_options() against `part`: the cutter within 0.005 mm of it, shank and holder 1 mm off.
   PatchOptions checked_options(const SurfaceIndex& part) const {
     PatchOptions po = patch_options();
@@ -443,12 +451,9 @@ TEST_CASE("a tool whose end would cut the hub under the flank is ground shorter 
   Setup s;
   // The hub rises to 2.7 mm at x = 10: between two of the 5% (1 mm) steps of the 20 mm tool.
   const SurfaceIndex hub(to_unit(sloping_hub(0.27), s.fr));
-  PatchOptions po = s.patch_options();
   const PatchSpec spec = s.upright();
-  const PatchFit free = fit_patch(s.phi, spec, po);
-  po.fit.check.part = &hub;
-  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
-  po.fit.check.body = s.body();
+  const PatchFit free = fit_patch(s.phi, spec, s.patch_options());
+  const PatchOptions po = s.over_hub(hub);
   // Without the hub the flat end sits level with the flank's lower edge, 2.7 mm into the hub at
   // x = 10 (less where the 12-point rim samples it).
   const CheckProfile before = check_profile(free.fit.rails, free.fit.tool, po.fit.check, 50, po.fit.samples_s);
@@ -527,13 +532,54 @@ TEST_CASE("cut_tool keeps the swept tool: rails and radii of the part that stays
   }
 }
 
+TEST_CASE("lengthened_at_tip continues the axis and the meridian's slope beyond the tip, and keeps the tool above it") {
+  Setup s;
+  for (const ToolShape shape : {ToolShape::Cone, ToolShape::General}) {
+    FitOptions o = s.o;
+    o.shape = shape;
+    PatchFit base;
+    base.fit = optimize_motion(s.phi, s.initial, o);  // tip (a) at z = 0
+    // A tool widening linearly from its tip (a general tool's Greville values of a line are the line).
+    ToolRadius& tool = base.fit.tool;
+    const int K = int(tool.D.size());
+    if (shape == ToolShape::General)
+      for (int k = 0; k < K; ++k) {
+        const double g = std::clamp((std::clamp(k - 2, 0, K - 3) + std::clamp(k - 1, 0, K - 3) + std::clamp(k, 0, K - 3)) / (3.0 * (K - 3)), 0.0, 1.0);
+        tool.D[size_t(k)] = 0.02 + 0.01 * g;
+      }
+    else
+      tool.D = {0.02, 0.03};
+    PatchOptions po;
+    po.fit = o;
+    po.tolerance = s.fr.length_to_unit(0.01);
+    const double L = base.fit.rails.length, e = 0.2 * L, f = e / L;
+    const std::optional<PatchFit> l = lengthened_at_tip(base, po, e);
+    REQUIRE(l.has_value());
+    CHECK(l->fit.rails.length == doctest::Approx(1.2 * L));
+    double worst_axis = 0, worst_radius = 0;
+    for (int i = 0; i <= 10; ++i)
+      for (int j = 0; j <= 12; ++j) {
+        const double t = i / 10.0, u = j / 12.0, sv = -f + (1 + f) * u;  // s on the old tool
+        worst_axis = std::max(worst_axis, (l->fit.rails.point(t, u) - base.fit.rails.point(t, sv)).norm());
+        const double expected = sv < 0 ? 0.02 + 0.01 * sv : tool.d(sv);  // the slope at the tip continued
+        worst_radius = std::max(worst_radius, std::abs(l->fit.tool.d(u) - expected));
+      }
+    MESSAGE(std::string(to_string(shape)), ": axis ", worst_axis, ", radius ", worst_radius, ", tip radius ", l->fit.tool.d(0));
+    CHECK(worst_axis < 1e-12);
+    CHECK(worst_radius < (shape == ToolShape::Cone ? 1e-15 : 1e-5));
+    CHECK(l->fit.tool.d(0) == doctest::Approx(0.02 - 0.01 * f).epsilon(1e-4));
+    // Lengthened so far that the continued meridian would end below zero: no tool.
+    CHECK_FALSE(lengthened_at_tip(base, po, 2.5 * L).has_value());
+    // A fixed tool is not ground.
+    po.fit.fixed_tool = tool;
+    CHECK_FALSE(lengthened_at_tip(base, po, e).has_value());
+  }
+}
+
 TEST_CASE("a ball end is checked as its ball: shortened less than a flat end over the same hub" * doctest::test_suite("heavy")) {
   Setup s;
   const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
-  PatchOptions po = s.patch_options();
-  po.fit.check.part = &hub;
-  po.fit.check.tolerance = s.fr.length_to_unit(0.005);
-  po.fit.check.body = s.body();
+  PatchOptions po = s.over_hub(hub);
   po.fit.check.ball_tip = true;
   po.machined.end = ToolEnd{EndKind::Ball, 0, s.fr.length_to_mm(1.0)};
   const PatchSpec spec = s.upright();
