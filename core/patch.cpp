@@ -330,7 +330,7 @@ std::optional<PatchFit> lengthened_at_tip(const PatchFit& base, const PatchOptio
   const Rails& r = base.fit.rails;
   if (o.fit.fixed_tool || !(e > 0) || !tip_is_a(r, o.fit.check)) return std::nullopt;
   ToolCut longer = cut_tool(r, base.fit.tool, -e / r.length, 1);
-  if (!admissible_cut(longer, o) || !(longer.tool.d(0) > 0)) return std::nullopt;
+  if (!admissible_cut(longer, o)) return std::nullopt;  // tool_defect in it refuses a tip radius not above 0
   PatchFit out = base;
   out.fit.rails = std::move(longer.rails);
   out.fit.tool = std::move(longer.tool);

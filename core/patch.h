@@ -117,8 +117,8 @@ struct ToolCut {
 // and detection's floor pass turn it; by CheckSurface::up): the axis continued beyond a, the
 // meridian along its slope there (exact for cylinders and cones), so that a tip stopping above a
 // floor reaches down to it; with_check then grinds off what meets the part. Untrimmed and
-// unmachined; none for a fixed tool, a tip at b, or when the longer tool is no tool (tool_defect, a
-// tip radius not above 0) or breaks its limits.
+// unmachined; none for a fixed tool, a tip at b, or when the longer tool is no tool (tool_defect: a
+// tip radius not above 0, among others) or breaks its limits.
 [[nodiscard]] std::optional<PatchFit> lengthened_at_tip(const PatchFit& base, const PatchOptions& o, double e);
 
 // The rails restricted to [t0, t1], reparametrised to [0, 1] (same control point count).

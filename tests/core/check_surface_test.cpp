@@ -544,7 +544,7 @@ TEST_CASE("lengthened_at_tip continues the axis and the meridian's slope beyond 
     const int K = int(tool.D.size());
     if (shape == ToolShape::General)
       for (int k = 0; k < K; ++k) {
-        const double g = std::clamp((std::clamp(k - 2, 0, K - 3) + std::clamp(k - 1, 0, K - 3) + std::clamp(k, 0, K - 3)) / (3.0 * (K - 3)), 0.0, 1.0);
+        const double g = (std::clamp(k - 2, 0, K - 3) + std::clamp(k - 1, 0, K - 3) + std::clamp(k, 0, K - 3)) / (3.0 * (K - 3));
         tool.D[size_t(k)] = 0.02 + 0.01 * g;
       }
     else
