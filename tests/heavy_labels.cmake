@@ -3,7 +3,9 @@
 #     runs one suite (.ci/sanitize runs the suites that load Open CASCADE's translators apart, with
 #     LeakSanitizer's slow unwinder, see .ci/lsan.supp);
 #   - the test cases in doctest's test suite "heavy" (whole jobs and long numerics, see .ci/run) also
-#     get the label "heavy", so `ctest -LE heavy` leaves them out.
+#     get the label "heavy", so `ctest -LE heavy` leaves them out, and a COST of 10 (the others 1):
+#     `ctest -j N` starts the highest cost first when it has no timings of its own (a fresh clone, as
+#     in CI), so the long cases do not end up last beside an idle core.
 # One `--list-test-cases` and one `--list-test-cases --test-suite=heavy` per suite (doctest_discover_tests'
 # ADD_LABELS would start the suite once per test case, and its --test-case filter splits names at commas).
 # Usage: cmake -DEXE=suite -DOUT=file.cmake -P heavy_labels.cmake (OUT is a TEST_INCLUDE_FILES script)
@@ -29,9 +31,11 @@ list_cases(heavy --test-suite=heavy)
 set(script "")
 foreach(line IN LISTS all)
   set(labels "${suite}")
+  set(cost 1)
   if(line IN_LIST heavy)
     string(APPEND labels ";heavy")
+    set(cost 10)
   endif()
-  string(APPEND script "set_tests_properties([==[${line}]==] PROPERTIES LABELS \"${labels}\")\n")
+  string(APPEND script "set_tests_properties([==[${line}]==] PROPERTIES LABELS \"${labels}\" COST ${cost})\n")
 endforeach()
 file(WRITE "${OUT}" "${script}")
