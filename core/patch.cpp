@@ -283,7 +283,10 @@ std::vector<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& pl
     PatchFit f = plain;
     f.fit.rails = std::move(cut.rails);
     f.fit.tool = std::move(cut.tool);
-    f.tip_shortened = r.length - f.fit.rails.length;
+    // Net of a lengthening at the tip (lengthened_at_tip) that is ground back here.
+    const double net = f.tip_lengthened - (r.length - f.fit.rails.length);
+    f.tip_lengthened = std::max(net, 0.0);
+    f.tip_shortened = std::max(-net, 0.0);
     try {
       f.fit.eps_opt = sample_error(surface, f.fit.rails, f.fit.tool, o.fit);
     } catch (const InputError&) {
@@ -335,6 +338,7 @@ std::optional<PatchFit> lengthened_at_tip(const PatchFit& base, const PatchOptio
   out.fit.rails = std::move(longer.rails);
   out.fit.tool = std::move(longer.tool);
   out.clear_part_adjustments();
+  out.tip_lengthened = e;
   return out;
 }
 

@@ -72,11 +72,16 @@ struct PatchFit {
   std::optional<CheckTrim> check_trim;
   double check_intrusion = -INFINITY;
   bool check_refused = false;
-  double tip_shortened = 0;  // length ground off the cutter's tip end to keep it out of the part (unit frame)
-  double holder_lengthened = 0;  // length added to the cutter at its holder end to keep the shank clear (unit frame)
-  // A tool and motion of their own as they stand (refitted, shared, lengthened at the tip): nothing
-  // of them was ground off or lengthened to keep out of the part.
-  void clear_part_adjustments() { tip_shortened = holder_lengthened = 0; }
+  // What was done to the fitted cutter's length for the part (unit frame), at most one of the first
+  // two non-zero: the tip ground shorter to keep it out of the part, or made longer to reach the
+  // floor (lengthened_at_tip; ground back where it would meet the part, the net of the two); the
+  // holder end made longer to keep the shank clear.
+  double tip_shortened = 0;
+  double tip_lengthened = 0;
+  double holder_lengthened = 0;
+  // A tool and motion of their own as they stand (refitted, shared): nothing of them was ground off
+  // or lengthened to keep out of the part.
+  void clear_part_adjustments() { tip_shortened = tip_lengthened = holder_lengthened = 0; }
   std::optional<ExploredLine> explored;     // line-driven only
   std::optional<LineTrajectory> trajectory;  // line-driven only
 };

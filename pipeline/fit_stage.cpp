@@ -330,6 +330,9 @@ void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, con
   if (fp.fit.tip_shortened > 0)
     progress(fmt::format("patch {}: the tool ground {:.3f} mm shorter at its tip to keep its end out of the part", name,
                          out.frame.length_to_mm(fp.fit.tip_shortened)));
+  if (fp.fit.tip_lengthened > 0)
+    progress(fmt::format("patch {}: the cutter made {:.3f} mm longer at its tip to reach the floor", name,
+                         out.frame.length_to_mm(fp.fit.tip_lengthened)));
   if (fp.fit.holder_lengthened > 0)
     progress(fmt::format("patch {}: the cutter made {:.3f} mm longer at its holder end to keep the shank clear of the part", name,
                          out.frame.length_to_mm(fp.fit.holder_lengthened)));
@@ -822,6 +825,7 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
                                 {"kept_t", {p.fit.t_from, p.fit.t_to}},  // beyond [0, 1]: continued past the fit's end
                                 {"worst_intrusion_mm", round_mm(fr.length_to_mm(p.fit.check_intrusion))},
                                 {"tip_shortened_mm", round_mm(fr.length_to_mm(p.fit.tip_shortened))},
+                                {"tip_lengthened_mm", round_mm(fr.length_to_mm(p.fit.tip_lengthened))},
                                 {"holder_end_lengthened_mm", round_mm(fr.length_to_mm(p.fit.holder_lengthened))},
                                 {"refused", p.fit.check_refused}};
     if (const auto& t = p.fit.check_trim)

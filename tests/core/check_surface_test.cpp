@@ -568,11 +568,45 @@ TEST_CASE("lengthened_at_tip continues the axis and the meridian's slope beyond 
     CHECK(worst_axis < 1e-12);
     CHECK(worst_radius < (shape == ToolShape::Cone ? 1e-15 : 1e-5));
     CHECK(l->fit.tool.d(0) == doctest::Approx(0.02 - 0.01 * f).epsilon(1e-4));
+    CHECK(l->tip_lengthened == doctest::Approx(e));
+    CHECK(l->tip_shortened == 0.0);
     // Lengthened so far that the continued meridian would end below zero: no tool.
     CHECK_FALSE(lengthened_at_tip(base, po, 2.5 * L).has_value());
     // A fixed tool is not ground.
     po.fit.fixed_tool = tool;
     CHECK_FALSE(lengthened_at_tip(base, po, e).has_value());
+  }
+}
+
+TEST_CASE("a tip lengthened towards a floor and ground back where it meets it reports the net change against the fitted tool") {
+  // The upright fit's tip at z = 0, a floor at z = -0.5 mm: made 2 mm longer, the tip would stand
+  // 1.5 mm in the floor; with_check grinds it back to the floor, a net 0.5 mm longer than fitted
+  // (less the check tolerance's margin). The same 2 mm over a floor at z = -3 mm stays.
+  Setup s;
+  PatchFit base;
+  base.fit = optimize_motion(s.phi, s.initial, s.o);  // tip (a) at z = 0
+  const double e = s.fr.length_to_unit(2.0);
+  for (const double floor_z : {-0.5, -3.0}) {
+    const SurfaceIndex floor(to_unit(test::box_mesh({0, -20, -10}, {30, 80, floor_z}, 4), s.fr));
+    const PatchOptions po = s.over_hub(floor);
+    const std::optional<PatchFit> longer = lengthened_at_tip(base, po, e);
+    REQUIRE(longer.has_value());
+    const PatchFit f = with_check(s.phi, *longer, po);
+    const double net_mm = s.fr.length_to_mm(f.fit.rails.length - base.fit.rails.length);
+    double tip_z = INFINITY;
+    for (int i = 0; i <= 20; ++i) tip_z = std::min(tip_z, s.fr.to_mm(f.fit.rails.a.point(i / 20.0)).z());
+    MESSAGE("floor at z = ", floor_z, " mm: tip at z = ", tip_z, " mm, lengthened ", s.fr.length_to_mm(f.tip_lengthened),
+            " mm, shortened ", s.fr.length_to_mm(f.tip_shortened), " mm, net ", net_mm, " mm");
+    CHECK(f.check_intrusion <= 0);
+    CHECK(f.tip_shortened == 0.0);
+    CHECK(s.fr.length_to_mm(f.tip_lengthened) == doctest::Approx(net_mm).epsilon(1e-9));
+    if (floor_z > -1) {
+      CHECK(net_mm > 0.3);
+      CHECK(net_mm < 0.5);
+      CHECK(tip_z > -0.5);
+    } else {
+      CHECK(net_mm == doctest::Approx(2.0).epsilon(1e-9));
+    }
   }
 }
 
