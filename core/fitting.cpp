@@ -518,10 +518,21 @@ ConstraintRows rows_at(const ToolRadius& tool, const ToolRadius& ball_from, doub
   // meridian's on a curved tool (by 3e-4 R on a lens d = 3 + 12 s - 16 s^2 mm, L = 40 mm).
   const RadiusProfile from = ball_from.profile();
   const double ball = std::min(c.min_ball_radius * (1 + kBallMargin), c.max_radius);
+  // The tip as ground ends in its end plane, where the spheres beyond it reach out further than d
+  // there (cutter_union: a cone d0 + k z widening from its tip is d0 / sqrt(1 - k^2) wide there; a
+  // cone held at d0 = 1 mm was a Ø2.018 mm tool): its bound on d is scaled by d over that width of
+  // `ball_from` (constrained_tool repeats the projection until it settles, as for the ball rows),
+  // at least sqrt(1 - k^2): the result's slope is within k.
+  double tip_scale[2] = {1, 1};
+  if (std::isfinite(c.max_tip_radius)) {
+    const std::vector<Eigen::Vector2d> ends = cutter_union(ball_from, L, 2);  // z = 0 and z = L
+    for (const int end : {0, 1})
+      if (ends[size_t(end)].y() > 0) tip_scale[end] = std::clamp(from.d(end) / ends[size_t(end)].y(), cosk, 1.0);
+  }
   for (const int end : {0, 1}) {
     if (end == 1 && !c.either_end) break;
     if (c.min_tip_radius > 0) row(-basis_row(end), -c.min_tip_radius / cosk);
-    if (std::isfinite(c.max_tip_radius)) row(basis_row(end), c.max_tip_radius);  // the meridian's r <= d there
+    if (std::isfinite(c.max_tip_radius)) row(basis_row(end), c.max_tip_radius * tip_scale[end]);
     if (c.min_ball_radius > 0) {
       const double inward = end == 0 ? 1 : -1;  // the axis direction from this end into the tool
       const double z0 = -from.d(end) * inward * from.d_s(end) / L;
@@ -549,9 +560,9 @@ ToolRadius constrained_tool(const ToolRadius& tool, double L, const ToolConstrai
   if (rows.h.size() == 0) return out;
   const Eigen::VectorXd x0 = Eigen::Map<const Eigen::VectorXd>(tool.D.data(), Eigen::Index(tool.D.size()));
   Eigen::VectorXd x = project(x0, rows.G, rows.h);
-  // The ball rows' axis points moved by the projection: projected again with them taken from the
-  // result until they settle (they move with the tip's slope times R: a few rounds).
-  for (int round = 0; round < 20 && c.min_ball_radius > 0; ++round) {
+  // The ball rows' axis points and the tip's scale moved by the projection: projected again with
+  // them taken from the result until they settle (they move with the tip's slope: a few rounds).
+  for (int round = 0; round < 20 && (c.min_ball_radius > 0 || std::isfinite(c.max_tip_radius)); ++round) {
     out.D.assign(x.data(), x.data() + x.size());
     rows = rows_at(tool, out, L, c);
     const Eigen::VectorXd next = project(x0, rows.G, rows.h);
@@ -586,8 +597,13 @@ ConstraintCheck check_constraints(const ToolRadius& tool, double L, const ToolCo
   note(rmax - c.max_radius, "max_diameter");
   note(c.min_tip_radius - mer.front().y(), "min_tip_diameter");
   if (c.either_end) note(c.min_tip_radius - mer.back().y(), "min_tip_diameter");
-  note(mer.front().y() - c.max_tip_radius, "max_tip_diameter");
-  if (c.either_end) note(mer.back().y() - c.max_tip_radius, "max_tip_diameter");
+  // The tip as ground: the tool ends in its tip plane (cutter_union), as wide there as the spheres
+  // above it reach, at least the meridian's end.
+  if (std::isfinite(c.max_tip_radius)) {
+    const std::vector<Eigen::Vector2d> ends = cutter_union(tool, L, 2);  // z = 0 and z = L
+    note(ends.front().y() - c.max_tip_radius, "max_tip_diameter");
+    if (c.either_end) note(ends.back().y() - c.max_tip_radius, "max_tip_diameter");
+  }
   if (c.min_ball_radius > 0) {
     note(c.min_ball_radius - end_ball_radius(mer), "end.corner");
     if (c.either_end) {

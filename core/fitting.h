@@ -267,8 +267,10 @@ constexpr double kMaxSlenderness = 20;
 // The radii projected onto the constraints (least change of the parameters D): every row
 // of G D <= h below holds afterwards within 1e-12. `length` is the axis length L (unit frame).
 // Bounds on r are turned into bounds on d through the steepest slope the result may have. The ball
-// rows (min_ball_radius) stand at axis points that depend on the radii: they are taken from the
-// result and the projection repeated until they settle, so the rows at the result's own points hold.
+// rows (min_ball_radius) stand at axis points that depend on the radii, and the tip's upper bound
+// is scaled by the radii (the tool as ground is wider in its tip plane than d there where it widens
+// from its tip): both are taken from the result and the projection repeated until they settle, so
+// the rows of the result's own radii hold.
 // The ball row asks for R (1 + kBallMargin) (constraint_rows).
 inline constexpr double kBallMargin = 1e-3;
 [[nodiscard]] ToolRadius constrained_tool(const ToolRadius& tool, double length, const ToolConstraints& c);
@@ -279,8 +281,8 @@ struct ConstraintRows {
   Eigen::VectorXd h;
 };
 [[nodiscard]] ConstraintRows constraint_rows(const ToolRadius& tool, double length, const ToolConstraints& c);
-// The worst violation of the constraints by the tool's meridian (meridian(tool, length, 121)) and
-// its length: 0 when every constraint holds within kConstraintSlack (a meridian on its bound, up to
+// The worst violation of the constraints by the tool's meridian (meridian(tool, length, 121); the
+// tip's upper bound by the tool as ground, cutter_union's radius in its end plane) and its length: 0 when every constraint holds within kConstraintSlack (a meridian on its bound, up to
 // rounding, holds it); names the constraint in `what` (empty when they all hold).
 inline constexpr double kConstraintSlack = 1e-9;
 struct ConstraintCheck {

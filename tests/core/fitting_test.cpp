@@ -585,9 +585,12 @@ TEST_CASE("constrained_tool projects random radii onto every constraint row") {
     c.min_radius = 0.04, c.max_radius = 0.12, c.min_tip_radius = 0.05, c.max_cone_angle_rad = 0.1, c.convex = trial % 2 == 0;
     // A corner end on every fifth tool (its rows' axis points move with the projection: no fixed rows).
     if (trial % 5 == 1) c.min_ball_radius = 0.07, c.either_end = trial % 10 == 1;
+    // A tip limit on every fourth but those (its bound scales with the radii: no fixed rows either;
+    // a ball of 0.07 within 0.06 of the tip's width needs a steeper tool than the cone angle allows).
+    if (trial % 4 == 2 && c.min_ball_radius == 0) c.max_tip_radius = 0.06, c.either_end = trial % 8 == 2;
     const ToolRadius p = constrained_tool(tool, 0.3, c);
     const Eigen::VectorXd D = Eigen::Map<const Eigen::VectorXd>(p.D.data(), Eigen::Index(p.D.size()));
-    if (c.min_ball_radius == 0) {
+    if (c.min_ball_radius == 0 && !std::isfinite(c.max_tip_radius)) {
       const ConstraintRows rows = constraint_rows(tool, 0.3, c);  // the rows the projection used
       CHECK((rows.G * D - rows.h).maxCoeff() <= 1e-12);
     }
@@ -651,6 +654,19 @@ TEST_CASE("a corner end's radius and the tip's diameter limits are constraints o
   const ToolRadius both = constrained_tool(turned_cone, L, mt);
   CHECK(both.D[1] == doctest::Approx(0.07).epsilon(1e-9));
   CHECK(check_constraints(both, L, mt).what.empty());
+  // A cone widening from its tip (0.06 to 0.1): ground, it ends in its tip plane, where the spheres
+  // above the tip reach out to 0.06 / sqrt(1 - 0.1^2) = 0.0603 (cutter_union), not the meridian's
+  // 0.0597. Held at 0.06 that is what is brought down to it, on the bound.
+  ToolConstraints wt;
+  wt.max_tip_radius = 0.06;
+  CHECK(cutter_union(turned_cone, L, 2).front().y() == doctest::Approx(0.06 / std::sqrt(0.99)).epsilon(1e-6));
+  CHECK(check_constraints(turned_cone, L, wt).what == "max_tip_diameter");
+  const ToolRadius ground = constrained_tool(turned_cone, L, wt);
+  const double ground_tip = cutter_union(ground, L, 2).front().y();
+  MESSAGE("widening cone held at its tip: d ", ground.D[0], " .. ", ground.D[1], ", ground tip radius ", ground_tip);
+  CHECK(ground_tip <= 0.06 + kConstraintSlack);
+  CHECK(ground_tip > 0.06 * (1 - 1e-6));
+  CHECK(check_constraints(ground, L, wt).what.empty());
   mt.min_tip_radius = 0.08;
   CHECK(mt.validate() == "tool.min_tip_diameter: larger than tool.max_tip_diameter");
   // A curved tool (a lens, its ball 2% short of R): held, the ball the run measures on its sampled

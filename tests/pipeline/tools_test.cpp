@@ -427,7 +427,7 @@ struct LeaningFlank {
 
 TEST_CASE("max_tip_diameter: a flat end beside a flank leaning over its floor reaches lower with a narrow tip" * doctest::test_suite("heavy")) {
   // Measured: the Ø10 cylinder the fit takes reaches z 2.5 mm (78.8% of the flank); its tip at most
-  // Ø2 mm, the cone (Ø1.87 to Ø10) reaches z 1.0 mm (85.2%).
+  // Ø2 mm, the cone (Ø1.77 to Ø9.96) reaches z 1.0 mm (85.2%).
   LeaningFlank f;
   std::string patches = "patches:\n  - name: p\n    init: lines\n    lines:\n";
   for (double y : {3.0, 30.0, 57.0}) {
@@ -439,6 +439,28 @@ TEST_CASE("max_tip_diameter: a flat end beside a flank leaning over its floor re
   CHECK(narrow.tip <= 2 + 1e-6);
   CHECK(wide.lowest >= 2.0);
   CHECK(narrow.lowest <= 1.25);
+}
+
+TEST_CASE("max_tip_diameter holds the tip as ground: a listed cone widening from its tip, no part to refit against") {
+  // The flank alone: the fit's own cone, its d held at Ø2 at the tip, was ground Ø2.018 mm there
+  // (the spheres above the tip reach out beyond d in the tip plane) while the report said "met".
+  LeaningFlank f;
+  std::string patches = "patches:\n  - name: p\n    init: lines\n    lines:\n";
+  for (double y : {3.0, 30.0, 57.0}) {
+    const Eigen::Vector3d a = Eigen::Vector3d(0, y, 0) + 5 * f.n, b = a + 30 * f.up;
+    patches += fmt::format("      - [{}, {}, {}, {}, {}, {}]\n", a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
+  }
+  const pipeline::FitRun run = fit_job_file(
+      f.dir, "surface: flank.obj\ntolerance: 0.02\ntool: {shape: cone, max_diameter: 10, max_tip_diameter: 2}\n" + patches);
+  REQUIRE(run.fitted.patches.size() == 1);
+  const pipeline::FittedPatch& p = run.fitted.patches[0];
+  const std::vector<Eigen::Vector2d>& prof = p.profile_mm;
+  MESSAGE("tip Ø", 2 * prof.front().y(), " mm, far end Ø", 2 * prof.back().y(), " mm, coverage ", p.fit.coverage);
+  const double tip = 2 * std::min(prof.front().y(), prof.back().y());
+  CHECK(tip <= 2 + 1e-6);
+  CHECK(tip > 1.99);  // on the limit, not far below it
+  CHECK(2 * std::max(prof.front().y(), prof.back().y()) > 5);  // still a cone widening from it
+  CHECK(pipeline::patch_report(run.job, run.fitted, p)["tool"]["constraints"]["met"] == true);
 }
 
 TEST_CASE("max_tip_diameter with patches: auto: detection holds the narrow tip at the floor, the tool widening above it" * doctest::test_suite("heavy")) {
