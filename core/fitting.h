@@ -282,8 +282,9 @@ struct ConstraintRows {
 };
 [[nodiscard]] ConstraintRows constraint_rows(const ToolRadius& tool, double length, const ToolConstraints& c);
 // The worst violation of the constraints by the tool's meridian (meridian(tool, length, 121); the
-// tip's upper bound by the tool as ground, cutter_union's radius in its end plane) and its length: 0 when every constraint holds within kConstraintSlack (a meridian on its bound, up to
-// rounding, holds it); names the constraint in `what` (empty when they all hold).
+// tip's upper bound by the tool as ground, cutter_union's radius in its end plane) and its length:
+// 0 when every constraint holds within kConstraintSlack (a meridian on its bound, up to rounding,
+// holds it); names the constraint in `what` (empty when they all hold).
 inline constexpr double kConstraintSlack = 1e-9;
 struct ConstraintCheck {
   double violation = 0;  // unit frame (radii, length) or radians (cone angle) or unit (waist depth)
