@@ -991,7 +991,14 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
       continue;
     const auto [end, dir] = body_axis(r, cs, m);
     const double base = dir.dot(end), widen = c.clearance + cs.grow;
-    in_slab[k] = body_part.closest_in_slab(pts[k], dir, base + cs.u_lo - widen, base + cs.u_hi + widen);
+    // The shank's first sample under a narrower shank: its slab not widened below the cutter's end.
+    // The part there within the cutter's radius is the cutter's alone (body_nearest's shade), and
+    // where a tapered cutter's flank goes on above its end, that flank lies nearest below the end:
+    // the sample saw nothing, while the flank just above the end stood inside the shank's clearance
+    // (the HECC impeller: a Ø8 shank over a Ø1.7 -> Ø8.66 mm cutter 0.435 mm off the blade, refused
+    // by the collision check after detection had judged it clear).
+    const double below = cs.shade > 0 && !c.body.empty() && cs.u_lo <= c.body.front().x() ? 0.0 : widen;
+    in_slab[k] = body_part.closest_in_slab(pts[k], dir, base + cs.u_lo - below, base + cs.u_hi + widen);
   }
   resolve_body(r, c, samples, out, in_slab, m);
   return out;

@@ -610,6 +610,49 @@ TEST_CASE("a tip lengthened towards a floor and ground back where it meets it re
   }
 }
 
+TEST_CASE("a shank narrower than a tapered cutter's end is checked against the flank that goes on above the end") {
+  // A cone Ø1.74 widening to Ø8.66 mm over 16.2 mm (the HECC impeller's auto-2), axis along z, its
+  // side on the plane flank x = -(r0 + k z) that goes on 5 mm above the cutter's end; a Ø8 shank
+  // beyond the end. The shank's start stands (4.33 - 4) / sqrt(1 + k^2) = 0.323 mm off the flank,
+  // inside the 0.5 mm clearance (the collision check found the impeller's 0.435 mm off). The part
+  // points nearest to the shank's first axis point lie below the cutter's end within its radius (the
+  // cutter's alone) and hid the flank above it; the next sample, 2 mm up, is clear of the diverging
+  // flank: the fit's check saw 0.073 mm (its cutter rims), now 0.293 (0.177 plus the samples' sag).
+  const double L = 16.2, r0 = 0.87, r1 = 4.33, k = (r1 - r0) / L, top = L + 5;
+  const TriMesh flank_mm = test::grid_mesh(41, 21, [&](int i, int j) {  // faces towards +x, the tool
+    const double y = -20 + i, z = top * j / 20.0;
+    return Eigen::Vector3d(-(r0 + k * z), y, z);
+  });
+  const Similarity fr = unit_diagonal_frame(flank_mm);
+  const SurfaceIndex part(transformed(flank_mm, fr));
+  CheckSurface c;
+  c.part = &part;
+  c.tolerance = fr.length_to_unit(0.02);
+  c.clearance = fr.length_to_unit(0.5);
+  for (int q = 0; q <= 15; ++q) c.body.emplace_back(fr.length_to_unit(2.0 * q), fr.length_to_unit(4.0));  // Ø8 over 30 mm
+  c.up = Eigen::Vector3d::UnitZ();
+  std::vector<AxisLine> lines;
+  for (double y : {-10.0, 0.0, 10.0}) lines.push_back({fr.to_unit({0, y, 0}), fr.to_unit({0, y, L})});
+  FitOptions o;
+  o.shape = ToolShape::Cone;
+  const Rails rails = rails_from_lines(lines, 0, 0, o);
+  ToolRadius cone;
+  cone.shape = ToolShape::Cone;
+  cone.D = {fr.length_to_unit(r0), fr.length_to_unit(r1)};
+  for (const bool enclose : {false, true}) {
+    const CheckProfile p = check_profile(rails, cone, c, 20, 30, enclose);
+    double worst = -INFINITY;
+    bool body = false;
+    for (size_t i = 0; i < p.intrusion.size(); ++i)
+      if (p.intrusion[i] > worst) worst = p.intrusion[i], body = p.body[i];
+    MESSAGE(std::string(enclose ? "enclosing" : "fit's"), " samples: worst intrusion ", fr.length_to_mm(worst), " mm (",
+            std::string(body ? "shank or holder" : "cutter"), ")");
+    CHECK(body);
+    CHECK(fr.length_to_mm(worst) > 0.15);  // 0.5 - 0.323 = 0.177 inside the clearance
+    CHECK(fr.length_to_mm(worst) < 0.35);
+  }
+}
+
 TEST_CASE("a ball end is checked as its ball: shortened less than a flat end over the same hub" * doctest::test_suite("heavy")) {
   Setup s;
   const SurfaceIndex hub(to_unit(sloping_hub(), s.fr));
