@@ -997,7 +997,7 @@ std::vector<CheckDistance> check_distances(const Rails& r, const CheckSurface& c
     // the sample saw nothing, while the flank just above the end stood inside the shank's clearance
     // (the HECC impeller: a Ø8 shank over a Ø1.7 -> Ø8.66 mm cutter 0.435 mm off the blade, refused
     // by the collision check after detection had judged it clear).
-    const double below = cs.shade > 0 && !c.body.empty() && cs.u_lo <= c.body.front().x() ? 0.0 : widen;
+    const double below = cs.shade > 0 && cs.u_lo <= c.body.front().x() ? 0.0 : widen;  // shade > 0: a body is given
     in_slab[k] = body_part.closest_in_slab(pts[k], dir, base + cs.u_lo - below, base + cs.u_hi + widen);
   }
   resolve_body(r, c, samples, out, in_slab, m);

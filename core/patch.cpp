@@ -200,7 +200,7 @@ ToolCut cut_tool(const Rails& r, const ToolRadius& tool, double lo, double hi) {
     Eigen::MatrixXd P(samples, 1);
     // Below the tip (lo < 0: the cutter made longer there) the meridian goes on along its slope at
     // the tip; the spline itself would hold the tip's radius.
-    const double h = 1e-4, slope = (tool.d(h) - tool.d(0)) / h;
+    const double slope = tool.profile().d_s(0);
     const auto radius = [&](double s) { return s < 0 ? tool.d(0) + s * slope : tool.d(s); };
     for (int i = 0; i < samples; ++i) P(i, 0) = radius(lo + (hi - lo) * ss[size_t(i)]);
     const BSpline f = fit_bspline(P, ss, K);

@@ -55,6 +55,12 @@ struct Setup {
     po.tolerance = fr.length_to_unit(0.01);
     return po;
   }
+  // The lowest z (mm) of the rails' a end (the tip) over 21 poses.
+  double lowest_tip_z(const Rails& r) const {
+    double z = INFINITY;
+    for (int i = 0; i <= 20; ++i) z = std::min(z, fr.to_mm(r.a.point(i / 20.0)).z());
+    return z;
+  }
   // patch_options() over a hub: the cutter within 0.005 mm of it, the shank and holder of body().
   PatchOptions over_hub(const SurfaceIndex& hub) const {
     PatchOptions po = patch_options();
@@ -463,8 +469,7 @@ TEST_CASE("a tool whose end would cut the hub under the flank is ground shorter 
   // refined by bisection: 2.7 mm, not the 3 mm of the next step): the whole motion is kept, nothing
   // enters the hub, and the flank above the cut is machined as before (what stays of the tool sweeps
   // the same surface).
-  double tip_z = INFINITY;
-  for (int i = 0; i <= 20; ++i) tip_z = std::min(tip_z, s.fr.to_mm(f.fit.rails.a.point(i / 20.0)).z());
+  const double tip_z = s.lowest_tip_z(f.fit.rails);
   MESSAGE("tip at z = ", tip_z, " mm, length ", s.fr.length_to_mm(f.fit.rails.length), " mm (was ",
           s.fr.length_to_mm(free.fit.rails.length), "), coverage ", f.coverage, " (was ", free.coverage, "), eps ",
           s.fr.length_to_mm(f.fit.eps_opt.max), " mm");
@@ -593,8 +598,7 @@ TEST_CASE("a tip lengthened towards a floor and ground back where it meets it re
     REQUIRE(longer.has_value());
     const PatchFit f = with_check(s.phi, *longer, po);
     const double net_mm = s.fr.length_to_mm(f.fit.rails.length - base.fit.rails.length);
-    double tip_z = INFINITY;
-    for (int i = 0; i <= 20; ++i) tip_z = std::min(tip_z, s.fr.to_mm(f.fit.rails.a.point(i / 20.0)).z());
+    const double tip_z = s.lowest_tip_z(f.fit.rails);
     MESSAGE("floor at z = ", floor_z, " mm: tip at z = ", tip_z, " mm, lengthened ", s.fr.length_to_mm(f.tip_lengthened),
             " mm, shortened ", s.fr.length_to_mm(f.tip_shortened), " mm, net ", net_mm, " mm");
     CHECK(f.check_intrusion <= 0);
@@ -662,8 +666,7 @@ TEST_CASE("a ball end is checked as its ball: shortened less than a flat end ove
   const PatchSpec spec = s.upright();
   const PatchFit f = fit_patch(s.phi, spec, po);
   // The Ø10 ball's centre must stay 5 mm from the hub's plane z = 0.3 x; for the axis at x = 5: (z_tip + 5 - 1.5) / 1.044 >= 5, z_tip >= 1.72 mm (a flat end: 3 mm).
-  double tip_z = INFINITY;
-  for (int i = 0; i <= 20; ++i) tip_z = std::min(tip_z, s.fr.to_mm(f.fit.rails.a.point(i / 20.0)).z());
+  const double tip_z = s.lowest_tip_z(f.fit.rails);
   MESSAGE("ball: tip at z = ", tip_z, " mm, shortened ", s.fr.length_to_mm(f.tip_shortened), " mm");
   CHECK(f.check_intrusion <= 0);
   CHECK(!f.check_refused);
@@ -730,8 +733,7 @@ TEST_CASE("a fin reaching 0.5 mm into the cutter's side just above its tip, betw
   const CheckProfile samples = check_profile(g.fit.rails, g.fit.tool, po.fit.check, 50, po.fit.samples_s, true);
   CHECK(*std::max_element(samples.intrusion.begin(), samples.intrusion.end()) <= 0);
   const PatchFit f = fit_patch(s.phi, spec, po);
-  double tip_z = INFINITY;
-  for (int i = 0; i <= 20; ++i) tip_z = std::min(tip_z, s.fr.to_mm(f.fit.rails.a.point(i / 20.0)).z());
+  const double tip_z = s.lowest_tip_z(f.fit.rails);
   const double y_end = s.fr.to_mm(f.fit.rails.a.point(1)).y();
   MESSAGE("t ", f.t_from, "-", f.t_to, ", motion ends at y = ", y_end, " mm, tip at z >= ", tip_z, " mm, coverage ", f.coverage,
           " (unchecked ", g.coverage, ")");

@@ -415,6 +415,15 @@ struct LeaningFlank {
     CHECK(machinable(p.fit));
     return r;
   }
+  // One listed patch p: three axis lines 5 mm off the flank along its normal, 30 mm up it.
+  std::string listed_patch() const {
+    std::string patches = "patches:\n  - name: p\n    init: lines\n    lines:\n";
+    for (double y : {3.0, 30.0, 57.0}) {
+      const Eigen::Vector3d a = Eigen::Vector3d(0, y, 0) + 5 * n, b = a + 30 * up;
+      patches += fmt::format("      - [{}, {}, {}, {}, {}, {}]\n", a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
+    }
+    return patches;
+  }
   Reach lowest_reached(const std::string& tool, const std::string& patches) {
     const pipeline::FitRun run =
         fit_job_file(dir, "surface: flank.obj\npart: floor.obj\ntolerance: 0.02\ntool: " + tool + "\n" + patches);
@@ -429,11 +438,7 @@ TEST_CASE("max_tip_diameter: a flat end beside a flank leaning over its floor re
   // Measured: the Ø10 cylinder the fit takes reaches z 2.5 mm (78.8% of the flank); its tip at most
   // Ø2 mm, the cone (Ø1.77 to Ø9.96) reaches z 1.0 mm (85.2%).
   LeaningFlank f;
-  std::string patches = "patches:\n  - name: p\n    init: lines\n    lines:\n";
-  for (double y : {3.0, 30.0, 57.0}) {
-    const Eigen::Vector3d a = Eigen::Vector3d(0, y, 0) + 5 * f.n, b = a + 30 * f.up;
-    patches += fmt::format("      - [{}, {}, {}, {}, {}, {}]\n", a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
-  }
+  const std::string patches = f.listed_patch();
   const auto wide = f.lowest_reached("{shape: cone, max_diameter: 10}", patches);
   const auto narrow = f.lowest_reached("{shape: cone, max_diameter: 10, max_tip_diameter: 2}", patches);
   CHECK(narrow.tip <= 2 + 1e-6);
@@ -445,11 +450,7 @@ TEST_CASE("max_tip_diameter holds the tip as ground: a listed cone widening from
   // The flank alone: the fit's own cone, its d held at Ø2 at the tip, was ground Ø2.018 mm there
   // (the spheres above the tip reach out beyond d in the tip plane) while the report said "met".
   LeaningFlank f;
-  std::string patches = "patches:\n  - name: p\n    init: lines\n    lines:\n";
-  for (double y : {3.0, 30.0, 57.0}) {
-    const Eigen::Vector3d a = Eigen::Vector3d(0, y, 0) + 5 * f.n, b = a + 30 * f.up;
-    patches += fmt::format("      - [{}, {}, {}, {}, {}, {}]\n", a.x(), a.y(), a.z(), b.x(), b.y(), b.z());
-  }
+  const std::string patches = f.listed_patch();
   const pipeline::FitRun run = fit_job_file(
       f.dir, "surface: flank.obj\ntolerance: 0.02\ntool: {shape: cone, max_diameter: 10, max_tip_diameter: 2}\n" + patches);
   REQUIRE(run.fitted.patches.size() == 1);
