@@ -2,6 +2,8 @@
 // the report, the machined envelopes coloured by deviation and the tool profiles.
 #include <fmt/format.h>
 
+#include <algorithm>
+
 #include "cli/commands.h"
 #include "pipeline/outputs.h"
 #include "pipeline/run.h"
@@ -25,11 +27,13 @@ int run_fit(FitArgs args) {
   const pipeline::FitRun fit = pipeline::fit(std::move(job), args.options);
   const std::vector<std::vector<std::string>> files = pipeline::write_fit(fit, out);
 
-  fmt::print("{:<16} {:<6} {:<9} {:>10} {:>10} {:>9}  files\n", "patch", "init", "tool", "eps", "eps mm", "coverage");
+  size_t tool_width = 9;  // a catalogue tool's name may be longer
+  for (const pipeline::FittedPatch& p : fit.fitted.patches) tool_width = std::max(tool_width, pipeline::tool_label(fit.job, p).size());
+  fmt::print("{:<16} {:<6} {:<{}} {:>10} {:>10} {:>9}  files\n", "patch", "init", "tool", tool_width, "eps", "eps mm", "coverage");
   for (size_t k = 0; k < fit.fitted.patches.size(); ++k) {
     const pipeline::FittedPatch& p = fit.fitted.patches[k];
-    fmt::print("{:<16} {:<6} {:<9} {:>10.2e} {:>10.4f} {:>8.1f}%  {}\n", p.job->name, to_string(p.job->init),
-               pipeline::tool_label(fit.job, p), p.fit.fit.eps_opt.max, fit.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max),
+    fmt::print("{:<16} {:<6} {:<{}} {:>10.2e} {:>10.4f} {:>8.1f}%  {}\n", p.job->name, to_string(p.job->init),
+               pipeline::tool_label(fit.job, p), tool_width, p.fit.fit.eps_opt.max, fit.fitted.frame.length_to_mm(p.fit.fit.eps_opt.max),
                100 * p.fit.coverage, fmt::join(files[k], " "));
   }
   if (fit.fitted.cover) {

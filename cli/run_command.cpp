@@ -3,6 +3,8 @@
 // pictures, HTML). This file only parses arguments and prints.
 #include <fmt/format.h>
 
+#include <algorithm>
+
 #include "cli/commands.h"
 #include "pipeline/outputs.h"
 #include "pipeline/run.h"
@@ -29,13 +31,15 @@ int run_job(RunArgs args) {
   pipeline::write_run(run, out);
 
   const pipeline::FittedJob& fitted = run.fit.fitted;
-  fmt::print("{:<16} {:<9} {:>10} {:>9} {:>9} {:<11} {}\n", "patch", "tool", "eps", "eps mm", "coverage", "collisions",
+  size_t tool_width = 9;  // a catalogue tool's name may be longer
+  for (const pipeline::FittedPatch& p : fitted.patches) tool_width = std::max(tool_width, pipeline::tool_label(run.fit.job, p).size());
+  fmt::print("{:<16} {:<{}} {:>10} {:>9} {:>9} {:<11} {}\n", "patch", "tool", tool_width, "eps", "eps mm", "coverage", "collisions",
              "programs");
   for (const pipeline::FittedPatch& p : fitted.patches) {
     std::vector<std::string> programs;
     for (const pipeline::PostedProgram& w : run.programs)
       if (w.patch == p.job->name) programs.push_back(w.file);
-    fmt::print("{:<16} {:<9} {:>10.2e} {:>9.4f} {:>9} {:<11} {}\n", p.job->name, pipeline::tool_label(run.fit.job, p),
+    fmt::print("{:<16} {:<{}} {:>10.2e} {:>9.4f} {:>9} {:<11} {}\n", p.job->name, pipeline::tool_label(run.fit.job, p), tool_width,
                p.fit.fit.eps_opt.max, fitted.frame.length_to_mm(p.fit.fit.eps_opt.max),
                fmt::format("{:.1f}%", 100 * p.fit.coverage),
                p.collisions.clear() ? "none" : fmt::format("{} interval(s)", p.collisions.intervals.size()),

@@ -321,10 +321,12 @@ namespace {
 void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, const Progress& progress) {
   const std::string& name = fp.job->name;
   const FitResult& r = fp.fit.fit;
-  progress(fmt::format("patch {}: eps {:.2e} -> {:.2e} of the diagonal ({:.4f} mm), coverage {:.1f}% within {} mm, "
-                       "{:.1f} s + {:.1f} s",
-                       name, r.eps_ini.max, r.eps_opt.max, out.frame.length_to_mm(r.eps_opt.max), 100 * fp.fit.coverage,
-                       job.tolerance_mm, fp.fit.seconds_init, fp.fit.seconds_opt));
+  // Detected patches were timed as part of the detection, not on their own.
+  const std::string seconds = job.cover ? std::string()
+                                        : fmt::format(", {:.1f} s + {:.1f} s", fp.fit.seconds_init, fp.fit.seconds_opt);
+  progress(fmt::format("patch {}: eps {:.2e} -> {:.2e} of the diagonal ({:.4f} mm), coverage {:.1f}% within {} mm{}", name,
+                       r.eps_ini.max, r.eps_opt.max, out.frame.length_to_mm(r.eps_opt.max), 100 * fp.fit.coverage,
+                       job.tolerance_mm, seconds));
   if (r.status == FitStatus::SolverFailed)
     progress(fmt::format("patch {}: the least-squares solver failed ({}); the last good motion is kept", name, r.message));
   if (fp.fit.tip_shortened > 0)
@@ -376,6 +378,25 @@ void share_tool(const Job& job, const std::vector<const SurfaceIndex*>& targets,
     fp.fit = machine_and_trim(*targets[k], std::move(fp.fit), options[k]);
     report_fit(job, out, fp, progress);
   }
+}
+
+// A catalogue tool's patch against the best custom tool (general shape, radii free) fitted to the same
+// patch (its lines as given or detected), for the report.
+void compare_custom_tool(const Job& job, const Similarity& frame, const SurfaceIndex& target, const PatchSpec& spec,
+                         const PatchOptions& o, FittedPatch& fp, const Progress& progress) {
+  PatchOptions custom = o;
+  custom.fit.fixed_tool.reset();
+  custom.fit.shape = ToolShape::General;
+  custom.fit.on_iteration = nullptr;
+  custom.on_stage = nullptr;
+  const PatchFit c = fit_patch(target, spec, custom);
+  const ToolDimensions dims = tool_dimensions(tool_profile_mm(frame, c.fit));
+  fp.custom = CustomComparison{frame.length_to_mm(c.fit.eps_opt.max), c.coverage, dims.diameter_min_mm,
+                               dims.diameter_max_mm, dims.length_mm};
+  progress(fmt::format("patch {}: catalogue tool {}: eps {:.4f} mm, coverage {:.1f}%; best custom tool: eps {:.4f} mm, "
+                       "coverage {:.1f}%",
+                       fp.job->name, job.tool.catalogue->name, frame.length_to_mm(fp.fit.fit.eps_opt.max),
+                       100 * fp.fit.coverage, fp.custom->eps_mm, 100 * fp.custom->coverage));
 }
 
 // `patches: auto`: detect_patches over the whole surface with the job's fit options; the detected
@@ -458,6 +479,14 @@ void detect_job(const Job& job, const SurfaceIndex& index, const FitOptions& fit
     FittedPatch fp;
     fp.job = &out.detected[k];
     fp.fit = std::move(d.patches[k].fit);
+    if (job.tool.catalogue) {
+      PatchOptions o;
+      o.fit = fit;
+      o.fit.fixed_tool.reset();
+      o.tolerance = co.patch.tolerance;
+      o.machined = machined_options(job, out.frame);
+      compare_custom_tool(job, out.frame, index, d.patches[k].spec, o, fp, progress);
+    }
     report_fit(job, out, fp, progress);
     out.patches.push_back(std::move(fp));
   }
@@ -666,21 +695,7 @@ FittedJob fit_job(const Job& job, int threads, const Progress& progress) {
       fixed.length = catalogue->second;
       for (AxisLine& l : fixed.lines) l.b = l.a + catalogue->second * (l.b - l.a).normalized();
       fp.fit = fit_patch(*target, fixed, o);
-      // The best custom tool for the same patch, to compare: general shape, radii free.
-      PatchOptions custom = o;
-      custom.fit.fixed_tool.reset();
-      custom.fit.shape = ToolShape::General;
-      custom.fit.on_iteration = nullptr;
-      custom.on_stage = nullptr;
-      const PatchFit c = fit_patch(*target, spec, custom);
-      const std::vector<Eigen::Vector2d> profile = tool_profile_mm(out.frame, c.fit);
-      const ToolDimensions dims = tool_dimensions(profile);
-      fp.custom = CustomComparison{out.frame.length_to_mm(c.fit.eps_opt.max), c.coverage, dims.diameter_min_mm,
-                                   dims.diameter_max_mm, dims.length_mm};
-      progress(fmt::format("patch {}: catalogue tool {}: eps {:.4f} mm, coverage {:.1f}%; best custom tool: eps {:.4f} mm, "
-                           "coverage {:.1f}%",
-                           p.name, job.tool.catalogue->name, out.frame.length_to_mm(fp.fit.fit.eps_opt.max),
-                           100 * fp.fit.coverage, fp.custom->eps_mm, 100 * fp.custom->coverage));
+      compare_custom_tool(job, out.frame, *target, spec, o, fp, progress);
     } else {
       fp.fit = fit_patch(*target, spec, o);
     }
@@ -860,8 +875,9 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
                         {"stop_backward", to_string(p.fit.trajectory->stop_backward)},
                         {"stop_forward", to_string(p.fit.trajectory->stop_forward)}};
   }
-  j["seconds"] = {{"init", std::round(p.fit.seconds_init * 1000) / 1000},
-                  {"optimisation", std::round(p.fit.seconds_opt * 1000) / 1000}};
+  if (!job.cover)  // a detected patch was fitted among the detection's candidates, not timed on its own
+    j["seconds"] = {{"init", std::round(p.fit.seconds_init * 1000) / 1000},
+                    {"optimisation", std::round(p.fit.seconds_opt * 1000) / 1000}};
   return j;
 }
 

@@ -357,13 +357,9 @@ Job read_job(const std::filesystem::path& file) {
   if (!ps) throw InputError(name + ": patches: missing (a list of patches with their initialisation, or auto)");
   if (ps.IsScalar() && ps.Scalar() == "auto") {
     // Detection fits its own motions and tools patch by patch; with `shared: true` one custom tool
-    // for all of them (the first patch's held for the others, then refitted jointly). A catalogue
-    // tool held from the first candidate on does not find the patches yet (the exact barrel over two
-    // flanks: 55% in 8 patches), and detection fits Φ itself: an allowance is for listed patches
-    // (detected-job.yaml takes both), passes leave stock before a last pass on Φ.
-    if (const YAML::Node t = root["tool"]; t && t["catalogue"])
-      r.fail(t["catalogue"], "tool.catalogue",
-             "not with patches: auto (list the patches, e.g. from detected-job.yaml; or tool: {shared: true} for one custom tool)");
+    // for all of them (the first patch's held for the others, then refitted jointly); with a
+    // catalogue tool the motions alone, that tool held. Detection fits Φ itself: an allowance is for
+    // listed patches (detected-job.yaml takes both), passes leave stock before a last pass on Φ.
     if (root["allowance"])
       r.fail(root["allowance"], "allowance",
              "not with patches: auto (list the patches, e.g. from detected-job.yaml; or passes: [{allowance: 0.3}, {allowance: 0}])");
