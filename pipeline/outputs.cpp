@@ -96,7 +96,7 @@ std::vector<std::string> write_patch_files(OutputDir& out, const Job& job, const
 }
 
 void write_program(OutputDir& out, const PostedProgram& p, const PostSettings& s) {
-  write_nc(out.file(p.file), p.posted.program, {p.dialect, s.line_numbers, s.options.path.tolerance_mm});
+  write_nc(out.file(p.file), p.posted.program, {p.dialect, s.line_numbers, p.posted.tolerance_mm});  // as back-simulated
 }
 // The 3D view of report.html: Φ with each patch's deviation, Ω, the fitted poses, collision markers,
 // and the motion of every posted program (the first dialect's) taken back to the part frame.

@@ -114,6 +114,9 @@ nlohmann::ordered_json program_report(const PostedProgram& w, const Machine& m) 
     j["rotary_range_deg"][m.rotary[k].name] = {std::round(w.rotary_range[k][0] * 1e4) / 1e4,
                                                std::round(w.rotary_range[k][1] * 1e4) / 1e4};
   j["cut_minutes"] = std::round(w.minutes * 1e4) / 1e4;
+  j["linearisation"] = {{"tolerance_mm", w.posted.tolerance_mm}, {"angle_tolerance_deg", w.posted.angle_tolerance_deg},
+                        {"refined", w.posted.refined}};
+  if (w.posted.refined > 0) j["linearisation"]["refined_for"] = w.posted.refined_for;
   if (w.posted.links_checked && std::isfinite(w.posted.min_link_clearance_mm))
     j["min_link_clearance_mm"] = std::round(w.posted.min_link_clearance_mm * 1e4) / 1e4;  // rapids, back-simulated
   return j;

@@ -413,6 +413,11 @@ RunResult run(Job job, Machine machine, const RunOptions& options) {
        fmt::format("work frame = part rotated X {} Y {} Z {} deg, moved by ({}, {}, {}) mm", j.post.setup_rotate_deg[0],
                    j.post.setup_rotate_deg[1], j.post.setup_rotate_deg[2], j.post.setup_translate_mm[0],
                    j.post.setup_translate_mm[1], j.post.setup_translate_mm[2])});
+  for (const PostedProgram& w : r.programs)
+    if (w.posted.refined > 0)
+      options.progress(fmt::format("{}: linearised at {:.6g} mm, {:.6g} deg instead of {} mm, {} deg, at which the cut entered the part: {}", w.file,
+                                   w.posted.tolerance_mm, w.posted.angle_tolerance_deg, j.post.tolerance_mm,
+                                   j.post.angle_tolerance_deg, w.posted.refined_for));
   // NAME.apt and NAME-cl.csv carry the links of the patch's program (the first dialect's): the CL-data
   // as posted, section by section, back in part coordinates. (The post must still be given the
   // unplanned CL-data: planned twice, the second plan would lead off the first's lead point.)

@@ -423,16 +423,30 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
   if (!o.part) {
     std::vector<std::string> h = header;
     h.push_back("links not checked against the part (no part given): check the program in a simulator");
-    return post_once(inputs, m, o, o, name, h, false);
+    Posted p = post_once(inputs, m, o, o, name, h, false);
+    p.tolerance_mm = o.path.tolerance_mm;
+    p.angle_tolerance_deg = o.path.angle_tolerance_deg;
+    return p;
   }
   // Plan, emit, back-simulate the text; when a motion outside the cut hits the part, plan again with
-  // the distances doubled (twice at most), else refuse.
+  // the distances doubled (twice at most), else refuse. When the cut alone hits it, linearise finer.
   PostOptions attempt = o;
   bool preposition = false;
-  for (int tries = 0;; ++tries) {
-    Posted p = post_once(inputs, m, attempt, o, name, header, preposition);
+  int refined = 0;
+  std::string refined_for;
+  for (int tries = 0;;) {
+    std::vector<std::string> h = header;
+    if (refined > 0)
+      h.push_back(fmt::format("linearisation refined to {:.6g} mm, {:.6g} deg: at {} mm, {} deg the cut entered the part",
+                              attempt.path.tolerance_mm, attempt.path.angle_tolerance_deg, o.path.tolerance_mm,
+                              o.path.angle_tolerance_deg));
+    Posted p = post_once(inputs, m, attempt, o, name, h, preposition);
+    p.tolerance_mm = attempt.path.tolerance_mm;
+    p.angle_tolerance_deg = attempt.path.angle_tolerance_deg;
+    p.refined = refined;
+    p.refined_for = refined_for;
     if (!p.refused.empty()) return p;  // a lead with no clear point: no retry makes room for it
-    const std::string text = nc_text(p.program, {o.dialect, o.line_numbers, o.path.tolerance_mm});
+    const std::string text = nc_text(p.program, {o.dialect, o.line_numbers, attempt.path.tolerance_mm});
     std::vector<VerifyTool> tools;
     for (const PostInput& in : inputs)
       if (std::none_of(tools.begin(), tools.end(), [&](const VerifyTool& t) { return t.number == in.cl.tool; }))
@@ -440,6 +454,17 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
     const VerifyReport rep = verify_text(text, o.dialect, name + file_extension(o.dialect), m, *o.part, tools,
                                          back_simulation_options(o), o.design_apart());
     const bool links_clear = std::none_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.rapid; });
+    const bool cut_only = !rep.hits.empty() && rep.cl_deviations.empty() &&
+                          std::all_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) {
+                            return !h.rapid && !h.tool_change && h.component == Component::Tool;
+                          });
+    if (cut_only && refined < Posted::kMaxRefinements) {
+      if (refined == 0) refined_for = rep.first_problem(name + file_extension(o.dialect));
+      ++refined;
+      attempt.path.tolerance_mm /= 2;
+      attempt.path.angle_tolerance_deg /= 2;
+      continue;
+    }
     if (links_clear || tries >= 2) {
       p.links_checked = true;
       for (const VerifiedBlock& b : rep.blocks)
@@ -447,11 +472,15 @@ Posted post(const std::vector<PostInput>& inputs, const Machine& m, const PostOp
           for (double c : b.min_clearance_mm) p.min_link_clearance_mm = std::min(p.min_link_clearance_mm, c);
       if (!rep.clean()) {
         p.refused = "back-simulation: " + rep.first_problem(name + file_extension(o.dialect));
+        if (refined > 0)
+          p.refused += fmt::format(" (linearised down to {:.6g} mm, {:.6g} deg)", attempt.path.tolerance_mm,
+                                   attempt.path.angle_tolerance_deg);
         p.worst_line = rep.hits.front().line;
         for (const VerifyHit& h : rep.hits) p.worst_line = std::min(p.worst_line, h.line);
       }
       return p;
     }
+    ++tries;
     // A tool change that hits the part: its swing moves up to safe Z first.
     if (!preposition && std::any_of(rep.hits.begin(), rep.hits.end(), [](const VerifyHit& h) { return h.tool_change; })) {
       preposition = true;

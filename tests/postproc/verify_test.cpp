@@ -674,3 +674,69 @@ TEST_CASE("a cut whose end has no clear lead is shortened to the outermost move 
   const Posted longer = cut_at(r.kept_last + 1);
   CHECK(longer.refused.find(fmt::format("no lead-out off CL move {} ", r.kept_last + 1)) != std::string::npos);
 }
+
+TEST_CASE("a cut that the machine's straight joint moves take into the part is linearised finer, said in the program, and posts clean") {
+  // A ball-end tool (Ø6) rolling along a floor z = 100 while its axis leans from -30° to +30° in x-z:
+  // the ball's lowest point stays on the floor, so the intended motion cuts nothing. On xyzbc-trt
+  // (no TCP) the table's B turns between the points; at a coarse linearisation (0.05 mm, 0.5°) the
+  // straight joint moves between them dip into the floor (measured: 0.034 mm; 0.169 mm at 0.2 mm),
+  // more than the 0.01 mm gouge tolerance.
+  const Machine m = shipped_machine("xyzbc-trt");
+  std::vector<Eigen::Vector2d> ball;
+  for (int k = 0; k <= 12; ++k) {
+    const double z = 3.0 * k / 12;
+    ball.emplace_back(z, std::sqrt(std::max(0.0, 9 - (3 - z) * (3 - z))));
+  }
+  ball.emplace_back(25, 3);
+  std::vector<ToolPose> poses;
+  for (int i = 0; i <= 12; ++i) {
+    const double lean = (-30 + 5.0 * i) * M_PI / 180;
+    const Eigen::Vector3d axis(std::sin(lean), 0, std::cos(lean));
+    const Eigen::Vector3d centre(-30 + 5.0 * i, 0, 103);  // the ball's centre, 3 mm above the floor
+    poses.push_back({centre - 3 * axis, axis});
+  }
+  const SurfaceIndex floor(test::box_mesh({-60, -20, 90}, {60, 20, 100}, 6));
+  PostOptions o;
+  o.dialect = Dialect::Iso;
+  o.path.tool_length_mm = 80;
+  o.path.tolerance_mm = 0.05;
+  o.path.angle_tolerance_deg = 0.5;
+  o.part = &floor;
+  o.gouge_tolerance_mm = 0.01;
+  const PostInput in{flank_program("FLOOR", poses, ball, 600, 10000, 5, 30), "floor", 80,
+                     assembly_from_meridian(ball, holder())};
+  const Posted p = post({in}, m, o, "FLOOR", {"verify test"});
+  INFO(p.refused);
+  CHECK(p.refused.empty());
+  MESSAGE("refined ", p.refined, " times: ", p.tolerance_mm, " mm, ", p.angle_tolerance_deg, " deg; ", p.refined_for);
+  REQUIRE(p.refined >= 1);
+  CHECK(p.refined <= Posted::kMaxRefinements);
+  CHECK(p.tolerance_mm == doctest::Approx(0.05 / std::pow(2, p.refined)));
+  CHECK(p.angle_tolerance_deg == doctest::Approx(0.5 / std::pow(2, p.refined)));
+  CHECK(p.refined_for.find("tool gouge") != std::string::npos);
+  // The text as written (blending at the refined tolerance), read back and judged on its own: clean;
+  // the header says why the chords are finer than asked.
+  const std::string text = nc_text(p.program, {o.dialect, false, p.tolerance_mm});
+  CHECK(text.find("linearisation refined to") != std::string::npos);
+  VerifyOptions vo;
+  vo.gouge_tolerance_mm = 0.01;
+  vo.link_clearance_mm = o.clearance_mm;
+  const VerifyReport rep = verify_text(text, o.dialect, "FLOOR.nc", m, floor, {{1, in.assembly, 80}}, vo);
+  CHECK(rep.clean());
+  // At the coarse linearisation alone the same text is not clean: that is what was refined away.
+  PostOptions coarse = o;
+  coarse.part = nullptr;
+  const Posted unchecked = post({in}, m, coarse, "FLOOR", {"verify test"});
+  const VerifyReport before = verify_text(nc_text(unchecked.program, {o.dialect, false, 0.05}), o.dialect, "FLOOR.nc", m, floor,
+                                          {{1, in.assembly, 80}}, vo);
+  CHECK(!before.hits.empty());
+  // A floor 0.05 mm higher is cut by the intended motion itself: no linearisation helps, the program
+  // is refused after the refinements and says how fine it went.
+  const SurfaceIndex higher(test::box_mesh({-60, -20, 90}, {60, 20, 100.05}, 6));
+  PostOptions h = o;
+  h.part = &higher;
+  const Posted r = post({in}, m, h, "FLOOR", {"verify test"});
+  CHECK(r.refined == Posted::kMaxRefinements);
+  CHECK(r.refused.find("tool gouge") != std::string::npos);
+  CHECK(r.refused.find("(linearised down to 0.00625 mm, 0.0625 deg)") != std::string::npos);
+}
