@@ -343,7 +343,7 @@ void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, con
     progress(fmt::format("patch {}: {} t {:.3f}-{:.3f}: the {} would {} {:.3f} mm {} the part at ({:.3f}, {:.3f}, {:.3f})",
                          name, fp.fit.check_refused ? "not trimmed (no clear stretch), kept" : "trimmed to", fp.fit.t_from,
                          fp.fit.t_to, c->body ? "shank or holder" : "cutter", c->body ? "come" : "cut",
-                         out.frame.length_to_mm(c->intrusion), c->body ? "inside the clearance of" : "into", at.x(), at.y(),
+                         out.frame.length_to_mm(c->intrusion), c->body ? "inside the clearance of" : "beyond check_tolerance into", at.x(), at.y(),
                          at.z()));
   } else if (fp.fit.t_from > 0 || fp.fit.t_to < 1) {
     progress(fmt::format("patch {}: trimmed to t {:.3f}-{:.3f}: beyond it the cutter would gouge the design surface by more "
