@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "core/envelope.h"
+#include "core/fitting.h"
 #include "core/mesh.h"
 
 namespace flankcam::test {
@@ -141,6 +142,17 @@ inline TriMesh floor_under_leaning_flank() { return box_mesh({-30, -20, -20}, {6
 // `axis`, of radius `radius`.
 inline double lowest_rim_z(const Eigen::Vector3d& tip, const Eigen::Vector3d& axis, double radius) {
   return tip.z() - radius * std::sqrt(std::max(0.0, 1 - axis.z() * axis.z()));
+}
+
+// The catalogue's circle-segment barrel barrel-d16-r150-l40 (Ø16 at the middle, profile radius
+// 150 mm, 40 mm long) as sphere radii in mm, from its meridian.
+inline ToolRadius catalogue_barrel_mm() {
+  std::vector<Eigen::Vector2d> zr;
+  for (int k = 0; k <= 80; ++k) {
+    const double z = 40.0 * k / 80;
+    zr.emplace_back(z, 8 - (150 - std::sqrt(150 * 150 - (z - 20) * (z - 20))));
+  }
+  return tool_from_meridian(zr, 12);
 }
 
 // An exact envelope of an analytic motion, scaled to a unit diagonal (the fitting's frame).

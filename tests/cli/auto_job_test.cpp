@@ -22,6 +22,13 @@ std::string auto_job(const test::ScratchDir& dir, const std::string& extra) {
   return dir.file("job.yaml");
 }
 
+// A `patches: auto` job on the bundled blade with the examples' holder and `keys` in dir/job.yaml.
+void blade_job(const test::ScratchDir& dir, const std::string& keys) {
+  test::write_text(dir.file("job.yaml"), "surface: " + std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj\n" +
+                                             "holder: {shank_length: 20, shank_diameter: 8, length: 40, diameter: 25, "
+                                             "diameter_far: 40}\n" + keys + "patches: auto\n");
+}
+
 // `flankcam <command>` of dir's job.yaml into dir/out, which must succeed: its report.json.
 nlohmann::json job_report(const test::ScratchDir& dir, const std::string& command) {
   const auto r = test::run_flankcam(command + " " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
@@ -140,12 +147,7 @@ TEST_CASE("patches: auto on the bundled blade stands every tool tip-down in the 
   // Detection knows no machine: a patch found with its tip at the top would need the head upside
   // down ("rotary axis B would need -172 deg"). The pipeline turns such a patch end for end.
   test::ScratchDir dir("auto-blade");
-  const std::string blade = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj";
-  test::write_text(dir.file("job.yaml"), "surface: " + blade +
-                                             "\ntool: {shape: general}\ntolerance: 0.015\n"
-                                             "holder: {shank_length: 20, shank_diameter: 8, length: 40, diameter: 25, "
-                                             "diameter_far: 40}\nmachine: xyzbc-head-table\npost: {dialects: [iso]}\n"
-                                             "patches: auto\n");
+  blade_job(dir, "tool: {shape: general}\ntolerance: 0.015\nmachine: xyzbc-head-table\npost: {dialects: [iso]}\n");
   const auto report = job_report(dir, "run");
   CHECK(double(report["cover"]["coverage"]) >= 0.95);
   REQUIRE(report["patches"].size() >= 1);
@@ -219,12 +221,8 @@ TEST_CASE("patches: auto with a catalogue tool: the bundled blade covered by the
   // Measured: 1 patch, 100% within 0.01 mm, ε 0.0061 mm (the best custom tool on the same lines:
   // 0.0057 mm, Ø10.1-12.3), verify clean, 6 s.
   test::ScratchDir dir("auto-catalogue");
-  const std::string blade = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj";
-  test::write_text(dir.file("job.yaml"), "surface: " + blade +
-                                             "\ntool: {catalogue: taper-d10-1deg-l65}\ntolerance: 0.01\n"
-                                             "holder: {shank_length: 20, shank_diameter: 8, length: 40, diameter: 25, "
-                                             "diameter_far: 40}\nclearance: 1\nmachine: xyzac-trt\npost: {dialects: [linuxcnc]}\n"
-                                             "patches: auto\n");
+  blade_job(dir, "tool: {catalogue: taper-d10-1deg-l65}\ntolerance: 0.01\nclearance: 1\nmachine: xyzac-trt\n"
+                 "post: {dialects: [linuxcnc]}\n");
   const auto report = job_report(dir, "run");
   CHECK(report["cover"]["tool"]["policy"] == "catalogue");
   CHECK(report["cover"]["tool"]["name"] == "taper-d10-1deg-l65");

@@ -749,12 +749,7 @@ TEST_CASE("a catalogue tool held through detection covers its own exact envelope
   // held as the fixed tool: seeds at its own radii, every candidate's motion fitted to it. Measured:
   // arc and twist 1 patch, 98.97% and 98.99% within 1e-4 of the diagonal, 1 seed each (helix 2
   // patches 98.99%, s-curve 4 patches 95.6%; two flanks of it 25 mm apart 3 patches 95.8%).
-  std::vector<Eigen::Vector2d> zr;
-  for (int k = 0; k <= 80; ++k) {
-    const double z = 40.0 * k / 80;
-    zr.emplace_back(z, 8 - (150 - std::sqrt(150 * 150 - (z - 20) * (z - 20))));
-  }
-  const ToolRadius mm_tool = tool_from_meridian(zr, 12);
+  const ToolRadius mm_tool = test::catalogue_barrel_mm();
   for (const char* kind : {"arc", "twist"}) {
     CAPTURE(std::string(kind));
     const test::ExactEnvelope ex = test::exact_envelope(kind, mm_tool.profile(), 50, 150);

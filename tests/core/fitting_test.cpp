@@ -712,12 +712,7 @@ TEST_CASE("a tool on its diameter bound meets it (rounding is no violation), one
 
 TEST_CASE("a fixed tool given by its meridian, fitted to its own exact envelope, is recovered by the motion alone" * doctest::test_suite("heavy")) {
   // A circle-segment (barrel) tool: Ø16 at the middle, profile radius 150 mm, 40 mm long.
-  std::vector<Eigen::Vector2d> zr;
-  for (int k = 0; k <= 80; ++k) {
-    const double z = 40.0 * k / 80;
-    zr.emplace_back(z, 8 - (150 - std::sqrt(150 * 150 - (z - 20) * (z - 20))));
-  }
-  const ToolRadius mm_tool = tool_from_meridian(zr, 12);
+  const ToolRadius mm_tool = test::catalogue_barrel_mm();
   // The sphere radii reproduce the meridian: d at the middle is the radius there, 8 mm.
   CHECK(std::abs(mm_tool.d(0.5) - 8) < 1e-3);
   const Exact ex = exact_envelope("arc", mm_tool.profile());
