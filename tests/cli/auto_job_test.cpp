@@ -22,13 +22,6 @@ std::string auto_job(const test::ScratchDir& dir, const std::string& extra) {
   return dir.file("job.yaml");
 }
 
-// A `patches: auto` job on the bundled blade with the examples' holder and `keys` in dir/job.yaml.
-void blade_job(const test::ScratchDir& dir, const std::string& keys) {
-  test::write_text(dir.file("job.yaml"), "surface: " + std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj\n" +
-                                             "holder: {shank_length: 20, shank_diameter: 8, length: 40, diameter: 25, "
-                                             "diameter_far: 40}\n" + keys + "patches: auto\n");
-}
-
 // `flankcam <command>` of dir's job.yaml into dir/out, which must succeed: its report.json.
 nlohmann::json job_report(const test::ScratchDir& dir, const std::string& command) {
   const auto r = test::run_flankcam(command + " " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
@@ -147,7 +140,12 @@ TEST_CASE("patches: auto on the bundled blade stands every tool tip-down in the 
   // Detection knows no machine: a patch found with its tip at the top would need the head upside
   // down ("rotary axis B would need -172 deg"). The pipeline turns such a patch end for end.
   test::ScratchDir dir("auto-blade");
-  blade_job(dir, "tool: {shape: general}\ntolerance: 0.015\nmachine: xyzbc-head-table\npost: {dialects: [iso]}\n");
+  const std::string blade = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj";
+  test::write_text(dir.file("job.yaml"), "surface: " + blade +
+                                             "\ntool: {shape: general}\ntolerance: 0.015\n"
+                                             "holder: {shank_length: 20, shank_diameter: 8, length: 40, diameter: 25, "
+                                             "diameter_far: 40}\nmachine: xyzbc-head-table\npost: {dialects: [iso]}\n"
+                                             "patches: auto\n");
   const auto report = job_report(dir, "run");
   CHECK(double(report["cover"]["coverage"]) >= 0.95);
   REQUIRE(report["patches"].size() >= 1);
@@ -216,14 +214,16 @@ TEST_CASE("patches: auto with a floor as the part: the tool's tip is brought ont
   CHECK(high <= 0.02);
 }
 
-TEST_CASE("patches: auto with a catalogue tool: the bundled blade covered by the bought taper, compared with a custom tool, verified" * doctest::test_suite("heavy")) {
+TEST_CASE("patches: auto with a catalogue tool (examples/auto/blade-catalogue.yaml): the bundled blade covered by the bought taper, compared with a custom tool, verified" * doctest::test_suite("heavy")) {
   // The catalogue's Ø10 1° taper, 65 mm long, held through detection: only motions are fitted.
   // Measured: 1 patch, 100% within 0.01 mm, ε 0.0061 mm (the best custom tool on the same lines:
   // 0.0057 mm, Ø10.1-12.3), verify clean, 6 s.
   test::ScratchDir dir("auto-catalogue");
-  blade_job(dir, "tool: {catalogue: taper-d10-1deg-l65}\ntolerance: 0.01\nclearance: 1\nmachine: xyzac-trt\n"
-                 "post: {dialects: [linuxcnc]}\n");
-  const auto report = job_report(dir, "run");
+  const std::string job = std::string(FLANKCAM_SOURCE_DIR) + "/examples/auto/blade-catalogue.yaml";
+  const auto r = test::run_flankcam("run " + job + " --out " + dir.file("out"), dir);
+  INFO(r.err);
+  REQUIRE(r.code == 0);
+  const auto report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
   CHECK(report["cover"]["tool"]["policy"] == "catalogue");
   CHECK(report["cover"]["tool"]["name"] == "taper-d10-1deg-l65");
   CHECK(double(report["cover"]["coverage"]) >= 0.95);
@@ -252,7 +252,7 @@ TEST_CASE("patches: auto with a catalogue tool: the bundled blade covered by the
   const auto again = test::run_flankcam("fit " + dir.file("out/detected-job.yaml") + " --out " + dir.file("again"), dir);
   INFO(again.err);
   CHECK(again.code == 0);
-  const auto v = test::run_flankcam("verify --job " + dir.file("job.yaml") + programs + " --out " + dir.file("verify"), dir);
+  const auto v = test::run_flankcam("verify --job " + job + programs + " --out " + dir.file("verify"), dir);
   INFO(v.err);
   CHECK(v.code == 0);
 }
