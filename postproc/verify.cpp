@@ -41,7 +41,7 @@ std::string VerifyReport::first_problem(const std::string& file) const {
     if (h.line == first && (!worst || h.depth_mm > worst->depth_mm)) worst = &h;
   if (worst) {
     const VerifyHit& h = *worst;
-    return fmt::format("{}:{}: {} {} {:.3f} mm deep at ({:.3f}, {:.3f}, {:.3f}) in {} {} ({})", file, h.line,
+    return fmt::format("{}:{}: {} {} {:.4f} mm deep at ({:.3f}, {:.3f}, {:.3f}) in {} {} ({})", file, h.line,
                        to_string(h.component), h.kind(), h.depth_mm, h.point.x(), h.point.y(), h.point.z(),
                        h.tool_change ? "the tool change before motion block" : "motion block", h.block,
                        h.tool_change ? "tool change" : h.rapid ? "rapid" : "feed") +
