@@ -516,13 +516,19 @@ int seed_position(const LineTrajectory& tr, const Eigen::Vector3d& seed_a) {
 // length w = min(L, max_length): the tip end low (at f0, or lifted to c0 less a radius, where a flat
 // end stands on the hub) and the tip end high (its far end at f1, or lowered to c1). They are
 // candidates of their own (the tier at the hub and the one above it); one when they agree. A line no
-// longer than max_length is only slid as far as the part needs (not at all without a part). Fixed
-// tools keep theirs (held_tool_start centres the tool's own length on the line).
-std::vector<LineTrajectory> placed_lines(const SurfaceIndex& surface, const LineTrajectory& tr, const CoverOptions& o) {
+// longer than max_length is only slid as far as the part needs (not at all without a part). A fixed
+// tool beside a part is placed the same way with its own length w, its tip end turned away from `up`
+// (the part's floor side; held_tool_start keeps it): centred on the line, the catalogue's Ø8 25 mm
+// cylinder stood 5 mm into the HECC diffuser's hub beside its 15 mm vane and the first patch covered
+// 0.9%. Without a part or `up` held_tool_start centres it on the line.
+std::vector<LineTrajectory> placed_lines(const SurfaceIndex& surface, const LineTrajectory& given, const CoverOptions& o) {
   const CheckSurface& check = o.patch.fit.check;
-  if (tr.a.empty() || o.patch.fit.fixed_tool) return {tr};
+  const bool fixed = o.patch.fit.fixed_tool.has_value();
+  if (given.a.empty() || (fixed && !(check.part && o.up))) return {given};
+  LineTrajectory tr = given;
+  if (fixed && (tr.b.front() - tr.a.front()).dot(*o.up) < 0) std::swap(tr.a, tr.b);
   const double L = (tr.b.front() - tr.a.front()).norm();
-  const double w = std::min(L, o.patch.fit.constraints.max_length);
+  const double w = fixed ? o.tool_length : std::min(L, o.patch.fit.constraints.max_length);
   if (!check.part && w >= L) return {tr};
   const size_t n = tr.a.size();
   // Samples along the axis, from w below its a end to w beyond its b end.
@@ -590,7 +596,7 @@ std::vector<LineTrajectory> placed_lines(const SurfaceIndex& surface, const Line
   };
   double apart = 0, slid = 0;
   for (size_t i = 0; i < n; ++i) apart = std::max(apart, std::abs(low[i] - high[i])), slid = std::max(slid, std::abs(low[i]));
-  if (w >= L && slid == 0) return {tr};
+  if (w >= L && slid == 0 && !fixed) return {tr};
   if (apart < 0.02 * w) return {moved(low)};
   return {moved(low), moved(high)};
 }

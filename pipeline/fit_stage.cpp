@@ -389,10 +389,21 @@ void compare_custom_tool(const Job& job, const Similarity& frame, const SurfaceI
   custom.fit.shape = ToolShape::General;
   custom.fit.on_iteration = nullptr;
   custom.on_stage = nullptr;
-  const PatchFit c = fit_patch(target, spec, custom);
+  // A comparison, not the job: lines a custom tool cannot follow (its radii describing no tool) say so.
+  PatchFit c;
+  try {
+    c = fit_patch(target, spec, custom);
+  } catch (const InputError& e) {
+    fp.custom = CustomComparison{};
+    fp.custom->failed = e.what();
+    progress(fmt::format("patch {}: catalogue tool {}: eps {:.4f} mm, coverage {:.1f}%; no custom tool on the same lines: {}",
+                         fp.job->name, job.tool.catalogue->name, frame.length_to_mm(fp.fit.fit.eps_opt.max),
+                         100 * fp.fit.coverage, fp.custom->failed));
+    return;
+  }
   const ToolDimensions dims = tool_dimensions(tool_profile_mm(frame, c.fit));
   fp.custom = CustomComparison{frame.length_to_mm(c.fit.eps_opt.max), c.coverage, dims.diameter_min_mm,
-                               dims.diameter_max_mm, dims.length_mm};
+                               dims.diameter_max_mm, dims.length_mm, {}};
   progress(fmt::format("patch {}: catalogue tool {}: eps {:.4f} mm, coverage {:.1f}%; best custom tool: eps {:.4f} mm, "
                        "coverage {:.1f}%",
                        fp.job->name, job.tool.catalogue->name, frame.length_to_mm(fp.fit.fit.eps_opt.max),
@@ -792,9 +803,12 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
     j["compare_custom_tool"] = {
         {"note", "the catalogue tool (this patch) against the best custom tool (general shape) fitted to the same patch"},
         {"catalogue", {{"eps_mm", round_mm(fr.length_to_mm(r.eps_opt.max))}, {"coverage", p.fit.coverage}}},
-        {"custom", {{"eps_mm", round_mm(p.custom->eps_mm)}, {"coverage", p.custom->coverage},
-                    {"diameter_min", round_mm(p.custom->diameter_min_mm)}, {"diameter_max", round_mm(p.custom->diameter_max_mm)},
-                    {"length", round_mm(p.custom->length_mm)}}}};
+        {"custom", p.custom->failed.empty()
+                       ? nlohmann::ordered_json{{"eps_mm", round_mm(p.custom->eps_mm)}, {"coverage", p.custom->coverage},
+                                                {"diameter_min", round_mm(p.custom->diameter_min_mm)},
+                                                {"diameter_max", round_mm(p.custom->diameter_max_mm)},
+                                                {"length", round_mm(p.custom->length_mm)}}
+                       : nlohmann::ordered_json{{"failed", p.custom->failed}}}};
   if (!job.passes_mm.empty()) {
     auto& passes = j["passes"] = nlohmann::ordered_json::array();
     for (const PassMotion& pm : p.earlier_passes)

@@ -22,6 +22,7 @@ using Progress = std::function<void(const std::string&)>;  // one line of progre
 struct CustomComparison {
   double eps_mm = 0, coverage = 0;  // ε (eq. 13) and share of the surface within the tolerance
   double diameter_min_mm = 0, diameter_max_mm = 0, length_mm = 0;
+  std::string failed;  // why no custom tool came of those lines (its fit refused); the numbers are then unset
 };
 
 // `passes:` before the last one: the same tool's motion fitted to Φ offset by the pass's allowance.

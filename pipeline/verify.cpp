@@ -48,6 +48,16 @@ std::map<int, std::string> tool_names(const std::string& text) {
   return out;
 }
 
+// The patches whose sections the program cuts, from its "patch NAME" comments, in order: one tool
+// (shared or from the catalogue) cuts several patches and is named after the first.
+std::vector<std::string> patch_names(const std::string& text) {
+  std::vector<std::string> out;
+  static const std::regex re(R"([(;]\s*patch ([A-Za-z0-9_.\-]+))");
+  for (auto it = std::sregex_iterator(text.begin(), text.end(), re); it != std::sregex_iterator(); ++it)
+    if (std::find(out.begin(), out.end(), (*it)[1].str()) == out.end()) out.push_back((*it)[1].str());
+  return out;
+}
+
 nlohmann::ordered_json round3(const Eigen::Vector3d& p) {
   return {std::round(p.x() * 1e4) / 1e4, std::round(p.y() * 1e4) / 1e4, std::round(p.z() * 1e4) / 1e4};
 }
@@ -217,6 +227,17 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
           const fs::path apt = path.parent_path() / (name + ".apt");
           if (is_file(apt)) load_cl(apt.string(), number);
           else missing.push_back(apt.filename().string());
+        }
+        // Further patches of a tool named after another: their CL-data by the tool it loads.
+        for (const std::string& name : patch_names(text)) {
+          const fs::path apt = path.parent_path() / (name + ".apt");
+          if (std::find(r.cl_files.begin(), r.cl_files.end(), apt.string()) != r.cl_files.end()) continue;
+          if (!is_file(apt)) {
+            missing.push_back(apt.filename().string());
+            continue;
+          }
+          load_cl(apt.string(), 0);
+          cl.back().tool = cl.back().cl.tool;
         }
         if (!missing.empty())
           r.cl_note = fmt::format("no {} beside the program (or --cl {}=FILE): {} compared with CL-data",

@@ -425,35 +425,46 @@ void compare_with_cl(const std::vector<SimBlock>& blocks, const std::vector<ClRe
       if (!r.cl.moves[k].rapid) cm.segments.emplace_back(r.cl.moves[k - 1].pose, r.cl.moves[k].pose);
     motions.push_back(std::move(cm));
   }
-  const auto motion_for = [&](int tool) -> const ClMotion* {
+  // A tool's CL motions: one per patch it cuts (one shared or catalogue tool cuts several), else
+  // those for every tool.
+  const auto motions_for = [&](int tool) {
+    std::vector<const ClMotion*> out;
     for (const ClMotion& c : motions)
-      if (c.ref->tool == tool) return &c;
-    for (const ClMotion& c : motions)
-      if (c.ref->tool == 0) return &c;
-    return nullptr;
+      if (c.ref->tool == tool) out.push_back(&c);
+    if (out.empty())
+      for (const ClMotion& c : motions)
+        if (c.ref->tool == 0) out.push_back(&c);
+    return out;
   };
   rep.cl_compared = true;
   for (const SimBlock& sb : blocks) {
     if (sb.rapid || sb.tool_change || sb.block == 0) continue;
-    const ClMotion* cl = motion_for(sb.tool);
-    if (!cl) continue;  // a tool without CL-data: checked geometrically only
-    if (cl->segments.empty()) {  // CL-data without a feed move: nothing may cut
-      rep.cl_deviations.push_back({sb.block, sb.line, INFINITY, INFINITY, sb.positions.back().tip});
+    const std::vector<const ClMotion*> cls = motions_for(sb.tool);
+    if (cls.empty()) continue;  // a tool without CL-data: checked geometrically only
+    if (std::all_of(cls.begin(), cls.end(), [](const ClMotion* c) { return c->segments.empty(); })) {
+      rep.cl_deviations.push_back({sb.block, sb.line, INFINITY, INFINITY, sb.positions.back().tip});  // nothing may cut
       continue;
     }
     ++rep.cl_blocks;
-    ClFit worst{0, 0};
+    // The block against each motion of its tool; the one it follows best.
+    ClFit worst{INFINITY, INFINITY};
     Eigen::Vector3d worst_tip = sb.positions.back().tip;
-    for (const ToolPose& q : sb.positions) {
-      const ClFit f = nearest_on_cl(*cl, q, o);
-      if (f.score(o) > worst.score(o)) worst = f, worst_tip = q.tip;
+    for (const ClMotion* c : cls) {
+      if (c->segments.empty()) continue;
+      ClFit w{0, 0};
+      Eigen::Vector3d at = sb.positions.back().tip;
+      for (const ToolPose& q : sb.positions) {
+        const ClFit f = nearest_on_cl(*c, q, o);
+        if (f.score(o) > w.score(o)) w = f, at = q.tip;
+      }
+      if (w.score(o) < worst.score(o)) worst = w, worst_tip = at;
     }
     if (worst.score(o) <= 1) {
       rep.cl_max_deviation_mm = std::max(rep.cl_max_deviation_mm, worst.tip_mm);
       rep.cl_max_angle_deg = std::max(rep.cl_max_angle_deg, worst.angle_deg);
       continue;
     }
-    if (is_lead(sb, *cl, part, o)) continue;
+    if (std::any_of(cls.begin(), cls.end(), [&](const ClMotion* c) { return is_lead(sb, *c, part, o); })) continue;
     rep.cl_deviations.push_back({sb.block, sb.line, worst.tip_mm, worst.angle_deg, worst_tip});
   }
 }

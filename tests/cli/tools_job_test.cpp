@@ -74,6 +74,53 @@ TEST_CASE("flankcam run of examples/blade/job-catalogue.yaml: the catalogue tape
     CHECK(!std::filesystem::exists(dir.file("out/" + name + "-tool-sheet.csv")));  // bought, not ground
   }
   CHECK(count(test::read_text(dir.file("out/all-patches.nc")), "M6") == 1);
+  // One tool, named after the first patch, cuts all three: verify compares each section with its own
+  // patch's CL-data (it compared all of them with blade-1.apt: 202 cutting blocks "off" by up to 1.1 mm).
+  const test::RunResult v =
+      test::run_flankcam("verify --job " + job + " " + dir.file("out/all-patches.nc") + " --out " + dir.file("verify"), dir);
+  CAPTURE(v.err);
+  CHECK(v.code == 0);
+  const nlohmann::json vj = nlohmann::json::parse(test::read_text(dir.file("verify/verify.json")));
+  const auto& cl = vj["programs"][0]["cl_data"];
+  CAPTURE(cl.dump());
+  CHECK(cl["files"].size() == 3);
+  CHECK(cl["feed_blocks_compared"].get<int>() > 250);
+  CHECK(cl["off_cl_data"].size() == 0);
+}
+
+TEST_CASE("a catalogue patch on which no custom tool can be fitted keeps its fit: the comparison says why, the job goes on") {
+  // The catalogue's Ø8 25 mm cylinder along the bundled blade's lower edge, its tip 3.3 mm below the
+  // blade (lines from a detection of it). The catalogue fit is good (ε 0.0014 mm); a general custom
+  // tool on the same lines folds back at its tip, where no design surface holds it, and is no tool.
+  // That comparison used to end the job with the custom fit's error; now report.json says why and
+  // the job runs on (exit 4 here: the Ø8 shank, as wide as the cutter, rubs the flank above the cut).
+  test::ScratchDir dir("catalogue-no-custom");
+  const std::string blade = std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj";
+  test::write_text(dir.file("job.yaml"),
+                   "surface: " + blade +
+                       "\ntool: {catalogue: cyl-d8-l25}\ntolerance: 0.01\n"
+                       "holder: {shank_length: 20, shank_diameter: 8, length: 40, diameter: 25, diameter_far: 40}\n"
+                       "clearance: 1\npatches:\n  - name: low\n    init: lines\n    length: 25\n    lines:\n"
+                       "      - [27.204720, 4.644823, -3.285893, 27.185912, 7.727636, 21.523300]\n"
+                       "      - [17.196132, 6.917139, -3.725951, 16.861424, 8.791596, 21.201426]\n"
+                       "      - [6.665515, 8.223704, -3.549020, 6.121380, 8.772418, 21.438997]\n"
+                       "      - [-4.005521, 7.610952, -3.354632, -4.376445, 6.820950, 21.630114]\n"
+                       "      - [-9.056903, 6.177625, -3.480467, -9.136712, 4.700263, 21.475753]\n");
+  const test::RunResult r = test::run_flankcam("fit " + dir.file("job.yaml") + " --out " + dir.file("out"), dir);
+  CAPTURE(r.err);
+  CHECK((r.code == 0 || r.code == 4));
+  CHECK(r.err.find("flankcam: error") == std::string::npos);
+  CHECK(r.err.find("patch low: catalogue tool cyl-d8-l25: eps ") != std::string::npos);
+  CHECK(r.err.find("no custom tool on the same lines: ") != std::string::npos);
+  const nlohmann::json report = nlohmann::json::parse(test::read_text(dir.file("out/report.json")));
+  REQUIRE(report["patches"].size() == 1);
+  const auto& p = report["patches"][0];
+  CHECK(p["eps_opt_mm"].get<double>() < 0.01);
+  CHECK(p["compare_custom_tool"]["catalogue"]["eps_mm"] == p["eps_opt_mm"]);
+  const auto& custom = p["compare_custom_tool"]["custom"];
+  REQUIRE(custom.contains("failed"));
+  CHECK(std::string(custom["failed"]).find("describe no tool") != std::string::npos);
+  CHECK(!custom.contains("eps_mm"));
 }
 
 TEST_CASE("passes: NAME.apt holds every pass in order, and flankcam verify finds the program on its CL-data" * doctest::test_suite("heavy")) {

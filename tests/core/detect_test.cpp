@@ -773,3 +773,44 @@ TEST_CASE("a catalogue tool held through detection covers its own exact envelope
     CHECK(f.rails.length == doctest::Approx(o.tool_length).epsilon(1e-12));
   }
 }
+
+TEST_CASE("with a part: a held tool longer than the flank is high stands with its tip on the floor, not centred on the flank" * doctest::test_suite("heavy")) {
+  // The extruded flank x = 0.01 (y - 30)^2 (y 0..60, z 0..15 mm) on a floor z <= 0, like the HECC
+  // diffuser's 15 mm vane on its hub, and a held Ø8 cylinder 25 mm long (the catalogue's cyl-d8-l25),
+  // which machines the flank exactly standing upright on the floor. Centred on the flank's height its
+  // tip stood 5 mm into the floor (the diffuser's first patch: 0.9%); placed like a custom tool of its
+  // length, its tip end away from `up`, it stands on the floor. One patch each: 3.6% centred, 96.7%
+  // on the floor (all but the bottom row).
+  const TriMesh phi_mm = test::grid_mesh(61, 16, [](int j, int k) { return Eigen::Vector3d(0.01 * (j - 30) * (j - 30), j, k); });
+  const Similarity fr = unit_diagonal_frame(phi_mm);
+  const SurfaceIndex phi(transformed(phi_mm, fr));
+  const SurfaceIndex floor(transformed(test::box_mesh({-30, -20, -20}, {40, 80, 0}, 4), fr));
+  CoverOptions o = cylinders_with_part(fr, floor, 0.01);
+  ToolRadius cylinder;
+  cylinder.shape = ToolShape::Cylinder;
+  cylinder.D = {fr.length_to_unit(4)};
+  o.patch.fit.fixed_tool = cylinder;
+  o.tool_length = fr.length_to_unit(25);
+  o.max_patches = 1;
+  o.exchanges = 0;
+  o.regions = 0;
+  const Detection centred = detect_patches(phi, o);  // no `up`: centred on the line
+  o.up = Eigen::Vector3d::UnitZ();
+  const Detection d = detect_patches(phi, o);
+  MESSAGE("centred: ", centred.patches.size(), " patches, ", centred.coverage, "; on the floor: ", d.patches.size(),
+          " patches, ", d.coverage, ", overcut ", fr.length_to_mm(d.overcut), " mm");
+  CHECK(centred.coverage < 0.5);
+  REQUIRE(d.patches.size() == 1);
+  CHECK(d.coverage >= 0.95);
+  CHECK(fr.length_to_mm(d.overcut) <= 0.01);
+  // The tool as held, upright, its tip on the floor: between the check tolerance into it and 0.5 mm above it.
+  const Rails& r = d.patches[0].fit.fit.rails;
+  CHECK(r.length == doctest::Approx(o.tool_length).epsilon(1e-12));
+  for (double t : {0.0, 0.5, 1.0}) {
+    CAPTURE(t);
+    const Eigen::Vector3d a = fr.to_mm(r.a.point(t)), b = fr.to_mm(r.b.point(t));
+    CHECK((b - a).normalized().z() > 0.99);
+    CHECK(a.z() >= -0.005 - 1e-6);
+    CHECK(a.z() <= 0.5);
+  }
+}
