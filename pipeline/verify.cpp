@@ -231,7 +231,9 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
         // Further patches of a tool named after another: their CL-data by the tool it loads.
         for (const std::string& name : patch_names(text)) {
           const fs::path apt = path.parent_path() / (name + ".apt");
-          if (std::find(r.cl_files.begin(), r.cl_files.end(), apt.string()) != r.cl_files.end()) continue;
+          if (std::find(r.cl_files.begin(), r.cl_files.end(), apt.string()) != r.cl_files.end() ||
+              std::find(missing.begin(), missing.end(), apt.filename().string()) != missing.end())
+            continue;
           if (!is_file(apt)) {
             missing.push_back(apt.filename().string());
             continue;
