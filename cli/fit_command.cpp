@@ -2,8 +2,6 @@
 // the report, the machined envelopes coloured by deviation and the tool profiles.
 #include <fmt/format.h>
 
-#include <algorithm>
-
 #include "cli/commands.h"
 #include "pipeline/outputs.h"
 #include "pipeline/run.h"
@@ -27,8 +25,7 @@ int run_fit(FitArgs args) {
   const pipeline::FitRun fit = pipeline::fit(std::move(job), args.options);
   const std::vector<std::vector<std::string>> files = pipeline::write_fit(fit, out);
 
-  size_t tool_width = 9;  // a catalogue tool's name may be longer
-  for (const pipeline::FittedPatch& p : fit.fitted.patches) tool_width = std::max(tool_width, pipeline::tool_label(fit.job, p).size());
+  const size_t tool_width = pipeline::tool_label_width(fit.job, fit.fitted.patches);
   fmt::print("{:<16} {:<6} {:<{}} {:>10} {:>10} {:>9}  files\n", "patch", "init", "tool", tool_width, "eps", "eps mm", "coverage");
   for (size_t k = 0; k < fit.fitted.patches.size(); ++k) {
     const pipeline::FittedPatch& p = fit.fitted.patches[k];

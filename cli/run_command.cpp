@@ -3,8 +3,6 @@
 // pictures, HTML). This file only parses arguments and prints.
 #include <fmt/format.h>
 
-#include <algorithm>
-
 #include "cli/commands.h"
 #include "pipeline/outputs.h"
 #include "pipeline/run.h"
@@ -31,8 +29,7 @@ int run_job(RunArgs args) {
   pipeline::write_run(run, out);
 
   const pipeline::FittedJob& fitted = run.fit.fitted;
-  size_t tool_width = 9;  // a catalogue tool's name may be longer
-  for (const pipeline::FittedPatch& p : fitted.patches) tool_width = std::max(tool_width, pipeline::tool_label(run.fit.job, p).size());
+  const size_t tool_width = pipeline::tool_label_width(run.fit.job, fitted.patches);
   fmt::print("{:<16} {:<{}} {:>10} {:>9} {:>9} {:<11} {}\n", "patch", "tool", tool_width, "eps", "eps mm", "coverage", "collisions",
              "programs");
   for (const pipeline::FittedPatch& p : fitted.patches) {

@@ -1048,6 +1048,12 @@ std::string tool_label(const Job& job, const FittedPatch& p) {
   return std::string(to_string(p.fit.fit.tool.shape)) + (job.tool.shared ? " (shared)" : "");
 }
 
+size_t tool_label_width(const Job& job, const std::vector<FittedPatch>& patches) {
+  size_t w = 9;
+  for (const FittedPatch& p : patches) w = std::max(w, tool_label(job, p).size());
+  return w;
+}
+
 namespace {
 // Patches refused for collisions (refuse_colliding): left out of the cover's union.
 long refused_patches(const FittedJob& f) {

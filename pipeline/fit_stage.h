@@ -102,6 +102,8 @@ void require_detected_patch(const Job& job, const FittedJob& fitted);
 // The patch's tool as tables name it: the catalogue name, or the fitted shape ("general",
 // "cone", ...; "shared" added when one tool serves every patch).
 [[nodiscard]] std::string tool_label(const Job& job, const FittedPatch& p);
+// The tables' tool column: as wide as the widest tool_label, at least 9 (a catalogue name is longer).
+[[nodiscard]] size_t tool_label_width(const Job& job, const std::vector<FittedPatch>& patches);
 // The "cover" entry of report.json (`patches: auto` only).
 [[nodiscard]] nlohmann::ordered_json cover_report(const Job& job, const FittedJob& fitted);
 // `patches: auto`: the job with the detected patches written out as `init: lines` (detected-job.yaml).
