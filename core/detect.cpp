@@ -940,6 +940,43 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
   return best;
 }
 
+// The round's best with its cutter made longer at its holder end (lengthened_to_reach) by 10%, 25%
+// and 50% of its length and to the tool's max_length, where that end's column of Ω still lies over
+// Φ; with a part (its tip stays on the floor; the holder end is b, as with_check turned it). A
+// patch's tool is as long as the lines it started from; where the flank grows taller along the
+// motion (the HECC impeller's blade: 18 mm at its trailing edge, 66 mm at its leading edge) the
+// cutter's holder end stops inside Φ, and the strip above it was reached by no patch (1.7% of the
+// blade along its shroud edge, 4-13 mm beyond the holder ends of the patches beside it). Each is
+// judged as a candidate (trimmed where it gouges Φ, shank and holder checked against the part where
+// they now stand); the one bringing most uncovered area is kept when it brings more. `end_swept`:
+// judged with the tool's end swept, as the floor pass judged `f`. Not without a part: there either
+// end may lengthen, and the exact envelopes' cones then gained a rim beyond Φ's boundary whose
+// written-out lines (init: lines) fitted radii that fold back where no Φ holds them.
+Fitted reaching_further(const SurfaceIndex& surface, Fitted f, const std::vector<char>& covered, const std::vector<double>& area,
+                        const CoverOptions& o, bool end_swept) {
+  PatchOptions po = candidate_options(o);
+  if (end_swept) po.machined.end = o.end;
+  tip_held_at_a(po, f.fit.fit.rails);
+  const MachinedSurface& ms = f.fit.machined;
+  bool over_phi = false;
+  for (int i = 0; i < ms.omega.n_t && !over_phi; ++i)
+    over_phi = std::isfinite(ms.omega_deviation[size_t(i) * size_t(ms.omega.n_s) + size_t(ms.omega.n_s - 1)]);
+  if (!over_phi) return f;
+  const double length = f.fit.fit.rails.length, room = po.fit.constraints.max_length - length;
+  Fitted best = f;
+  for (const double e : {0.1 * length, 0.25 * length, 0.5 * length, room}) {
+    if (!(e > 0) || !std::isfinite(e) || e > room) continue;
+    std::optional<PatchFit> l = lengthened_to_reach(f.fit, po, e, true);
+    if (!l) continue;
+    std::optional<PatchFit> j = judged(surface, std::move(*l), po);
+    if (!j || !machinable(*j)) continue;
+    const double g = gain_of(*j, covered, area, po.tolerance);
+    if (g > best.gain + 1e-4) best.fit = std::move(*j), best.gain = g;
+  }
+  if (best.gain > f.gain) best.whole_gain = f.cut ? f.whole_gain : best.gain;
+  return best;
+}
+
 // The principal axes of Φ's vertices, by increasing extent (columns).
 Eigen::Matrix3d extent_axes(const TriMesh& m) {
   Eigen::Vector3d centre = Eigen::Vector3d::Zero();
@@ -1227,6 +1264,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       so.spares = 0;
       so.regions = 0;
       so.continue_ends = false;
+      so.reach_further = false;
       so.floor_pass = false;
       so.width = width;
       int searched = 0;
@@ -1290,9 +1328,14 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
       report("continuing the best patch's motion past its ends");
       best = continued(surface, std::move(best), covered, area, o);
     }
-    if (best.ok && o.end && o.floor_pass && o.patch.fit.check.part && o.patch.fit.check.floor_reach > 0 && !o.patch.fit.fixed_tool) {
+    const bool floor_pass = o.end && o.floor_pass && o.patch.fit.check.part && o.patch.fit.check.floor_reach > 0 && !o.patch.fit.fixed_tool;
+    if (best.ok && floor_pass) {
       report("fitting the best patch again with its tip on the part's floor");
       best = floor_finished(surface, std::move(best), covered, area, o);
+    }
+    if (best.ok && o.reach_further && o.patch.fit.check.part && !o.patch.fit.fixed_tool) {
+      report("making the best patch's cutter longer where the surface goes on beyond it");
+      best = reaching_further(surface, std::move(best), covered, area, o, floor_pass);
     }
     // An exchange round whose best brings no more than the patch set aside (and does not reach the
     // target): that one returns to its place and stays; the next round sets aside the next weakest.

@@ -342,6 +342,18 @@ std::optional<PatchFit> lengthened_at_tip(const PatchFit& base, const PatchOptio
   return out;
 }
 
+std::optional<PatchFit> lengthened_to_reach(const PatchFit& base, const PatchOptions& o, double e, bool at_b) {
+  const Rails& r = base.fit.rails;
+  if (o.fit.fixed_tool || !(e > 0)) return std::nullopt;
+  ToolCut longer = at_b ? cut_tool(r, base.fit.tool, 0, 1 + e / r.length) : cut_tool(r, base.fit.tool, -e / r.length, 1);
+  if (!admissible_cut(longer, o)) return std::nullopt;
+  PatchFit out = base;
+  out.fit.rails = std::move(longer.rails);
+  out.fit.tool = std::move(longer.tool);
+  out.reach_lengthened += e;
+  return out;
+}
+
 PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOptions& options) {
   if (!options.fit.check.part) return machine_and_trim(surface, std::move(plain), options);
   PatchOptions o = options;

@@ -79,9 +79,11 @@ struct PatchFit {
   double tip_shortened = 0;
   double tip_lengthened = 0;
   double holder_lengthened = 0;
+  // The cutter made longer at an end to reach more of Φ (lengthened_to_reach, detection).
+  double reach_lengthened = 0;
   // A tool and motion of their own as they stand (refitted, shared): nothing of them was ground off
   // or lengthened to keep out of the part.
-  void clear_part_adjustments() { tip_shortened = tip_lengthened = holder_lengthened = 0; }
+  void clear_part_adjustments() { tip_shortened = tip_lengthened = holder_lengthened = reach_lengthened = 0; }
   std::optional<ExploredLine> explored;     // line-driven only
   std::optional<LineTrajectory> trajectory;  // line-driven only
 };
@@ -125,6 +127,15 @@ struct ToolCut {
 // unmachined; none for a fixed tool, a tip at b, or when the longer tool is no tool (tool_defect: a
 // tip radius not above 0, among others) or breaks its limits.
 [[nodiscard]] std::optional<PatchFit> lengthened_at_tip(const PatchFit& base, const PatchOptions& o, double e);
+
+// The cutter made longer by `e` (unit frame) at its b end (`at_b`) or its a end: the axis continued
+// beyond that end, the meridian holding its radius beyond b and going on along its slope beyond a (as
+// cut_tool), so that a cutter whose end stops inside Φ (a flank taller than the lines its patch
+// started from) reaches on over it. With a part the b end is the holder end (with_check turns the tip
+// to a): the shank and holder move out with it. The tool's other adjustments are kept and
+// `reach_lengthened` adds `e`. Untrimmed and unmachined; none for a fixed tool or when the longer
+// cutter is no tool or breaks its limits (max_length).
+[[nodiscard]] std::optional<PatchFit> lengthened_to_reach(const PatchFit& base, const PatchOptions& o, double e, bool at_b);
 
 // The rails restricted to [t0, t1], reparametrised to [0, 1] (same control point count).
 [[nodiscard]] Rails trimmed(const Rails& rails, double t0, double t1);

@@ -338,6 +338,9 @@ void report_fit(const Job& job, const FittedJob& out, const FittedPatch& fp, con
   if (fp.fit.holder_lengthened > 0)
     progress(fmt::format("patch {}: the cutter made {:.3f} mm longer at its holder end to keep the shank clear of the part", name,
                          out.frame.length_to_mm(fp.fit.holder_lengthened)));
+  if (fp.fit.reach_lengthened > 0)
+    progress(fmt::format("patch {}: the cutter made {:.3f} mm longer to reach the surface beyond its end", name,
+                         out.frame.length_to_mm(fp.fit.reach_lengthened)));
   if (const auto& c = fp.fit.check_trim) {
     const Eigen::Vector3d at = out.frame.to_mm(c->at);
     progress(fmt::format("patch {}: {} t {:.3f}-{:.3f}: the {} would {} {:.3f} mm {} the part at ({:.3f}, {:.3f}, {:.3f})",
@@ -845,6 +848,8 @@ nlohmann::ordered_json patch_report(const Job& job, const FittedJob& f, const Fi
                    {"worst_pose", iv.worst_pose},
                    {"depth_mm", round_mm(iv.max_depth_mm)},
                    {"at_mm", vec_mm(iv.at)}});
+  // Detection made the cutter longer to reach more of the surface (reaching_further).
+  if (p.fit.reach_lengthened > 0) j["cutter_lengthened_to_reach_mm"] = round_mm(fr.length_to_mm(p.fit.reach_lengthened));
   // With a separate part: the fit kept the tool out of it (check surface), trimming where it could not.
   if (f.check_part) {
     nlohmann::ordered_json c = {{"part_triangles", f.part ? f.part->faces.size() : 0},

@@ -583,6 +583,48 @@ TEST_CASE("lengthened_at_tip continues the axis and the meridian's slope beyond 
   }
 }
 
+TEST_CASE("a cutter stopping inside the flank, made longer at its end, reaches the flank's edge, the axis and radius going on") {
+  // Lines from z = 0 to 12 mm on the 20 mm flank: the fitted cutter leaves the flank above z = 12 to
+  // no motion. Made 8 mm longer at b, the same motion machines the flank to its top edge; beyond a,
+  // the meridian goes on along its slope (a cylinder: the same radius).
+  Setup s;
+  PatchSpec spec = s.upright();
+  for (AxisLine& l : spec.lines) l.b = s.fr.to_unit({5, s.fr.to_mm(l.b).y(), 12});
+  PatchOptions po = s.patch_options();
+  po.fit.constraints.max_length = s.fr.length_to_unit(25);
+  const PatchFit base = fit_patch(s.phi, spec, po);
+  const double e = s.fr.length_to_unit(8);
+  const std::optional<PatchFit> longer = lengthened_to_reach(base, po, e, true);
+  REQUIRE(longer.has_value());
+  const PatchFit m = machine_and_trim(s.phi, *longer, po);
+  double worst_axis = 0, worst_radius = 0;
+  const double L = base.fit.rails.length, f = e / L;
+  for (int i = 0; i <= 10; ++i)
+    for (int j = 0; j <= 12; ++j) {
+      const double t = i / 10.0, u = j / 12.0, sv = (1 + f) * u;  // s on the old tool
+      worst_axis = std::max(worst_axis, (longer->fit.rails.point(t, u) - base.fit.rails.point(t, sv)).norm());
+      worst_radius = std::max(worst_radius, std::abs(longer->fit.tool.d(u) - base.fit.tool.d(std::min(sv, 1.0))));
+    }
+  MESSAGE("coverage ", base.coverage, " -> ", m.coverage, ", axis ", worst_axis, ", radius ", s.fr.length_to_mm(worst_radius),
+          " mm, length ", s.fr.length_to_mm(L), " -> ", s.fr.length_to_mm(m.fit.rails.length), " mm");
+  // The motion runs over y 5..50 mm, 75% of the flank: 0.75 x 12 / 20 of it before, its full height now.
+  CHECK(base.coverage < 0.5);
+  CHECK(m.coverage >= 0.9 * 0.75);
+  CHECK(machinable(m));
+  CHECK(worst_axis < 1e-12);
+  CHECK(s.fr.length_to_mm(worst_radius) < 0.001);  // within a tenth of the tolerance (admissible_cut)
+  CHECK(m.fit.rails.length == doctest::Approx(L + e));
+  CHECK(m.reach_lengthened == doctest::Approx(e));
+  // At a: the tip end goes on below z = 0, off the flank, and brings nothing.
+  const std::optional<PatchFit> below = lengthened_to_reach(base, po, e, false);
+  REQUIRE(below.has_value());
+  CHECK(s.lowest_tip_z(below->fit.rails) == doctest::Approx(s.lowest_tip_z(base.fit.rails) - 8).epsilon(1e-6));
+  // Beyond max_length (12 + 14 > 25 mm), or a fixed tool: none.
+  CHECK_FALSE(lengthened_to_reach(base, po, s.fr.length_to_unit(14), true).has_value());
+  po.fit.fixed_tool = base.fit.tool;
+  CHECK_FALSE(lengthened_to_reach(base, po, e, true).has_value());
+}
+
 TEST_CASE("a tip lengthened towards a floor and ground back where it meets it reports the net change against the fitted tool") {
   // The upright fit's tip at z = 0, a floor at z = -0.5 mm: made 2 mm longer, the tip would stand
   // 1.5 mm in the floor; with_check grinds it back to the floor, a net 0.5 mm longer than fitted
