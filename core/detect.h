@@ -68,9 +68,9 @@ struct CoverOptions {
   // over Φ (detect.cpp, `continued`). Off for the one-patch search of an uncovered region: its patch
   // is continued on the whole surface, as the round's best, where its end is judged.
   bool continue_ends = true;
-  // With a part: each round's best patch with its cutter made longer at its holder end where that
-  // end stops inside Φ (detect.cpp, `reaching_further`; custom tools). Off for the one-patch search
-  // of an uncovered region, as continue_ends.
+  // With a part, once the cover is chosen: each patch with its cutter made longer at its holder end
+  // where that end stops inside Φ (detect.cpp, `reaching_further`; custom tools, not shared), kept
+  // when the union's coverage grows. Off for the one-patch search of an uncovered region.
   bool reach_further = true;
   // The floor pass, with a part under the tools' tips (patch.fit.check.floor_reach > 0, a hub under a
   // blade's flank): candidates are fitted without the floor's pull on the tip; each round's best is
