@@ -827,6 +827,17 @@ Fitted fit_candidate(const SurfaceIndex& surface, const LineTrajectory& tr, cons
   return out;
 }
 
+// Whether a row (t index `row`, all of its s) or a column (s index `column`, all of its t; row < 0) of
+// the machined surface's Ω still lies over Φ: a deviation of it is finite.
+bool omega_over_phi(const MachinedSurface& ms, int row, int column) {
+  const size_t n_s = size_t(ms.omega.n_s);
+  const int n = row >= 0 ? ms.omega.n_s : ms.omega.n_t;
+  for (int k = 0; k < n; ++k)
+    if (std::isfinite(ms.omega_deviation[row >= 0 ? size_t(row) * n_s + size_t(k) : size_t(k) * n_s + size_t(column)]))
+      return true;
+  return false;
+}
+
 // A patch's motion continued past an end whose last row of Ω still lies over Φ. Propagation stops a
 // motion where its line reaches Φ's boundary; a contact curve slanted to that boundary reaches it at
 // one end of the tool first and leaves a wedge of the boundary strip unmachined (rotor 37's trailing
@@ -843,11 +854,7 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
   if (po.fit.check.part) po.fit.check.up = mean_axis(f.fit.fit.rails);
   FitOptions held = po.fit;
   held.fixed_tool = f.fit.fit.tool;
-  const auto over_phi = [](const MachinedSurface& ms, int row) {
-    for (int j = 0; j < ms.omega.n_s; ++j)
-      if (std::isfinite(ms.omega_deviation[size_t(row) * size_t(ms.omega.n_s) + size_t(j)])) return true;
-    return false;
-  };
+  const auto over_phi = [](const MachinedSurface& ms, int row) { return omega_over_phi(ms, row, -1); };
   const PatchFit original = f.fit;
   const double t_from = original.t_from, w = original.t_to - original.t_from;
   // Not an end trimmed already (where the motion gouged Φ or met the part).
@@ -957,11 +964,7 @@ Fitted reaching_further(const SurfaceIndex& surface, Fitted f, const std::vector
   PatchOptions po = candidate_options(o);
   if (end_swept) po.machined.end = o.end;
   tip_held_at_a(po, f.fit.fit.rails);
-  const MachinedSurface& ms = f.fit.machined;
-  bool over_phi = false;
-  for (int i = 0; i < ms.omega.n_t && !over_phi; ++i)
-    over_phi = std::isfinite(ms.omega_deviation[size_t(i) * size_t(ms.omega.n_s) + size_t(ms.omega.n_s - 1)]);
-  if (!over_phi) return f;
+  if (!omega_over_phi(f.fit.machined, -1, f.fit.machined.omega.n_s - 1)) return f;
   const double length = f.fit.fit.rails.length, room = po.fit.constraints.max_length - length;
   Fitted best = f;
   for (const double e : {0.1 * length, 0.25 * length, 0.5 * length, room}) {
@@ -1474,8 +1477,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         if (j != k) mark_covered(chosen[j].fit, others);
       Fitted f;
       f.fit = chosen[k].fit;
-      f.ok = true;
-      f.gain = f.whole_gain = gain_of(f.fit, others, area, tol);
+      f.gain = gain_of(f.fit, others, area, tol);
       Fitted longer = reaching_further(surface, std::move(f), others, area, o, floor_pass);
       if (!(longer.fit.reach_lengthened > chosen[k].fit.reach_lengthened)) continue;
       std::vector<const MachinedSurface*> ms;

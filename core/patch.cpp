@@ -229,6 +229,20 @@ bool admissible_cut(const ToolCut& cut, const PatchOptions& o) {
   return !(cut.radius_error > 0.1 * o.tolerance) && !tool_defect(cut.tool, cut.rails.length) &&
          !(check_constraints(cut.tool, cut.rails.length, o.fit.constraints).violation > 0.01 * o.tolerance);
 }
+// The tool made longer by `e` (a share of its length) beyond its b end (at_b) or below its a end, the
+// axis and side continued (cut_tool beyond [0, 1]); none when that is no cut the fit may make.
+std::optional<ToolCut> longer_cut(const PatchFit& base, const PatchOptions& o, double e, bool at_b) {
+  const Rails& r = base.fit.rails;
+  ToolCut c = at_b ? cut_tool(r, base.fit.tool, 0, 1 + e) : cut_tool(r, base.fit.tool, -e, 1);
+  if (!admissible_cut(c, o)) return std::nullopt;  // tool_defect in it refuses a tip radius not above 0
+  return c;
+}
+// `base` with the rails and tool of `cut`.
+PatchFit with_cut(PatchFit base, ToolCut cut) {
+  base.fit.rails = std::move(cut.rails);
+  base.fit.tool = std::move(cut.tool);
+  return base;
+}
 
 // The cutter ground shorter at its tip end (the end away from the holder, CheckSurface::up) until it
 // keeps out of the part: what stays of the tool sweeps the same surface, only the strip the cut-off
@@ -280,9 +294,7 @@ std::vector<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& pl
                "% of the tool length");
   std::vector<PatchFit> out;
   for (ToolCut& cut : cuts) {
-    PatchFit f = plain;
-    f.fit.rails = std::move(cut.rails);
-    f.fit.tool = std::move(cut.tool);
+    PatchFit f = with_cut(plain, std::move(cut));
     // Net of a lengthening at the tip (lengthened_at_tip) that is ground back here.
     const double net = f.tip_lengthened - (r.length - f.fit.rails.length);
     f.tip_lengthened = std::max(net, 0.0);
@@ -312,18 +324,15 @@ std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOp
   double best_run = b1 - b0;
   std::optional<ToolCut> best;
   for (const double k : {1.0, 2.0, 4.0, 8.0}) {
-    const double e = k * o.fit.check.clearance / r.length;
-    ToolCut longer = tip_at_a ? cut_tool(r, base.fit.tool, 0, 1 + e) : cut_tool(r, base.fit.tool, -e, 1);
-    if (!admissible_cut(longer, o)) continue;
-    const auto [t0, t1] = clear_run(longer.rails, longer.tool, o);
+    std::optional<ToolCut> longer = longer_cut(base, o, k * o.fit.check.clearance / r.length, tip_at_a);
+    if (!longer) continue;
+    const auto [t0, t1] = clear_run(longer->rails, longer->tool, o);
     if (t1 - t0 > best_run + 1e-9) best_run = t1 - t0, best = std::move(longer);
     if (t0 == 0.0 && t1 == 1.0) break;  // clear everywhere: longer only risks more
   }
   if (!best) return std::nullopt;
-  PatchFit f = base;
-  f.holder_lengthened = best->rails.length - r.length;
-  f.fit.rails = best->rails;
-  f.fit.tool = best->tool;
+  PatchFit f = with_cut(base, std::move(*best));
+  f.holder_lengthened = f.fit.rails.length - r.length;
   return f;
 }
 
@@ -332,11 +341,9 @@ std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOp
 std::optional<PatchFit> lengthened_at_tip(const PatchFit& base, const PatchOptions& o, double e) {
   const Rails& r = base.fit.rails;
   if (o.fit.fixed_tool || !(e > 0) || !tip_is_a(r, o.fit.check)) return std::nullopt;
-  ToolCut longer = cut_tool(r, base.fit.tool, -e / r.length, 1);
-  if (!admissible_cut(longer, o)) return std::nullopt;  // tool_defect in it refuses a tip radius not above 0
-  PatchFit out = base;
-  out.fit.rails = std::move(longer.rails);
-  out.fit.tool = std::move(longer.tool);
+  std::optional<ToolCut> longer = longer_cut(base, o, e / r.length, false);
+  if (!longer) return std::nullopt;
+  PatchFit out = with_cut(base, std::move(*longer));
   out.clear_part_adjustments();
   out.tip_lengthened = e;
   return out;
@@ -345,11 +352,9 @@ std::optional<PatchFit> lengthened_at_tip(const PatchFit& base, const PatchOptio
 std::optional<PatchFit> lengthened_to_reach(const PatchFit& base, const PatchOptions& o, double e, bool at_b) {
   const Rails& r = base.fit.rails;
   if (o.fit.fixed_tool || !(e > 0)) return std::nullopt;
-  ToolCut longer = at_b ? cut_tool(r, base.fit.tool, 0, 1 + e / r.length) : cut_tool(r, base.fit.tool, -e / r.length, 1);
-  if (!admissible_cut(longer, o)) return std::nullopt;
-  PatchFit out = base;
-  out.fit.rails = std::move(longer.rails);
-  out.fit.tool = std::move(longer.tool);
+  std::optional<ToolCut> longer = longer_cut(base, o, e / r.length, at_b);
+  if (!longer) return std::nullopt;
+  PatchFit out = with_cut(base, std::move(*longer));
   out.reach_lengthened += e;
   return out;
 }
