@@ -689,6 +689,14 @@ Rails held_tool_start(const SurfaceIndex& surface, const Rails& r, const CoverOp
   return error(turned) < error(c) ? turned : c;
 }
 
+// Marks in `into` the vertices a fit brings within tolerance.
+void mark_covered(const PatchFit& f, double tol, std::vector<char>& into) {
+  for (size_t v = 0; v < into.size(); ++v) {
+    const double d = f.machined.design_deviation[v];
+    into[v] |= std::isfinite(d) && std::abs(d) <= tol;
+  }
+}
+
 // The share of Φ's area a fit brings within tolerance that is not covered yet.
 double gain_of(const PatchFit& f, const std::vector<char>& covered, const std::vector<double>& area, double tol) {
   double g = 0;
@@ -992,6 +1000,40 @@ Eigen::Matrix3d extent_axes(const TriMesh& m) {
 
 }  // namespace
 
+std::vector<size_t> reach_further(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
+                                  bool end_swept, const std::function<void(size_t)>& on_patch) {
+  std::vector<size_t> replaced;
+  if (!o.reach_further || !o.patch.fit.check.part || o.patch.fit.fixed_tool || o.shared_tool) return replaced;
+  const TriMesh& m = surface.mesh();
+  const size_t nv = m.vertices.size();
+  const std::vector<double> area = vertex_areas(m);
+  const double tol = o.patch.tolerance;
+  // The union's coverage with patch k machined as `instead` (k beyond the cover: as it is).
+  const auto union_coverage = [&](size_t k, const PatchFit* instead) {
+    std::vector<const MachinedSurface*> ms;
+    for (size_t j = 0; j < cover.size(); ++j) ms.push_back(j == k ? &instead->machined : &cover[j].machined);
+    return coverage(m, union_deviation(ms, nv).deviation, tol);
+  };
+  double now = union_coverage(cover.size(), nullptr);
+  for (size_t k = 0; k < cover.size(); ++k) {
+    if (on_patch) on_patch(k);
+    std::vector<char> others(nv, 0);
+    for (size_t j = 0; j < cover.size(); ++j)
+      if (j != k) mark_covered(cover[j], tol, others);
+    Fitted f;
+    f.fit = cover[k];
+    f.gain = gain_of(f.fit, others, area, tol);
+    Fitted longer = reaching_further(surface, std::move(f), others, area, o, end_swept);
+    if (!(longer.fit.reach_lengthened > cover[k].reach_lengthened)) continue;
+    if (const double c = union_coverage(k, &longer.fit); c > now) {
+      cover[k] = std::move(longer.fit);
+      now = c;
+      replaced.push_back(k);
+    }
+  }
+  return replaced;
+}
+
 Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& options,
                          const std::function<void(const CoverProgress&)>& on_progress) {
   if (auto err = options.validate(); !err.empty()) throw InputError(err);
@@ -1036,19 +1078,12 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     for (size_t v = 0; v < nv; ++v) covered[v] = std::isfinite(out.deviation[v]) && std::abs(out.deviation[v]) <= tol;
   };
   update_union();
-  // Marks in `into` the vertices a fit brings within tolerance.
-  const auto mark_covered = [&](const PatchFit& f, std::vector<char>& into) {
-    for (size_t v = 0; v < nv; ++v) {
-      const double d = f.machined.design_deviation[v];
-      into[v] |= std::isfinite(d) && std::abs(d) <= tol;
-    }
-  };
   // What each patch brings first, in the order they were found (after patches were exchanged or refitted).
   const auto recount_gains = [&]() {
     std::fill(covered.begin(), covered.end(), 0);
     for (Chosen& c : chosen) {
       c.gain = gain_of(c.fit, covered, area, tol);
-      mark_covered(c.fit, covered);
+      mark_covered(c.fit, tol, covered);
     }
   };
   out.stop = CoverStop::NoProgress;
@@ -1389,7 +1424,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
         held.patch.fit.fixed_tool = own.fit.fit.tool;
         held.tool_length = own.fit.fit.rails.length;
         std::vector<char> by_own(nv, 0);
-        mark_covered(own.fit, by_own);
+        mark_covered(own.fit, tol, by_own);
         own.gain = gain_of(own.fit, none, area, tol);
         report("choosing the shared tool: patch " + std::to_string(i + 1) + "'s tool held for the other");
         const Chosen& other = chosen[1 - i];
@@ -1470,23 +1505,13 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   // against 90.4% after the eighth), so it only adds to the cover the rounds chose. Not for a held
   // (catalogue or shared) tool.
   if (o.reach_further && o.patch.fit.check.part && !o.patch.fit.fixed_tool && !sharing) {
-    for (size_t k = 0; k < chosen.size(); ++k) {
+    std::vector<PatchFit> cover;
+    for (Chosen& c : chosen) cover.push_back(std::move(c.fit));
+    (void)reach_further(surface, cover, o, floor_pass, [&](size_t k) {
       report("making patch " + std::to_string(k + 1) + "'s cutter longer where the surface goes on beyond it");
-      std::vector<char> others(nv, 0);
-      for (size_t j = 0; j < chosen.size(); ++j)
-        if (j != k) mark_covered(chosen[j].fit, others);
-      Fitted f;
-      f.fit = chosen[k].fit;
-      f.gain = gain_of(f.fit, others, area, tol);
-      Fitted longer = reaching_further(surface, std::move(f), others, area, o, floor_pass);
-      if (!(longer.fit.reach_lengthened > chosen[k].fit.reach_lengthened)) continue;
-      std::vector<const MachinedSurface*> ms;
-      for (size_t j = 0; j < chosen.size(); ++j) ms.push_back(j == k ? &longer.fit.machined : &chosen[j].fit.machined);
-      if (coverage(m, union_deviation(ms, nv).deviation, tol) > out.coverage) {
-        chosen[k].fit = std::move(longer.fit);
-        update_union();
-      }
-    }
+    });
+    for (size_t k = 0; k < chosen.size(); ++k) chosen[k].fit = std::move(cover[k]);
+    update_union();
     recount_gains();
   }
 

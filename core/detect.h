@@ -152,6 +152,16 @@ struct Detection {
 [[nodiscard]] Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& options,
                                        const std::function<void(const CoverProgress&)>& on_progress = {});
 
+// The last pass of detect_patches (CoverOptions::reach_further; with a part, custom tools not
+// shared): each patch of `cover` in turn, its cutter made longer at its holder end where that end's
+// column of Ω still lies over Φ (lengthened_to_reach: by 10%, 25%, 50% of its length and to the
+// tool's max_length), judged as a candidate against what the other patches cover; the one bringing
+// most of that is kept in `cover` when the union's coverage of Φ grows. `end_swept`: judged with
+// CoverOptions::end swept (as the floor pass judged the patches). `on_patch(k)` before patch k.
+// Returns the indices of the patches replaced, in order.
+std::vector<size_t> reach_further(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
+                                  bool end_swept, const std::function<void(size_t)>& on_patch = {});
+
 // The union of several machined surfaces over Φ: owner and deviation per vertex (see Detection).
 struct UnionDeviation {
   std::vector<int> owner;

@@ -8,6 +8,7 @@
 
 #include "core/check_surface.h"
 #include "core/collision.h"
+#include "core/detect.h"
 #include "core/fitting.h"
 #include "core/patch.h"
 #include "tests/test_util.h"
@@ -623,6 +624,50 @@ TEST_CASE("a cutter stopping inside the flank, made longer at its end, reaches t
   CHECK_FALSE(lengthened_to_reach(base, po, s.fr.length_to_unit(14), true).has_value());
   po.fit.fixed_tool = base.fit.tool;
   CHECK_FALSE(lengthened_to_reach(base, po, e, true).has_value());
+}
+
+TEST_CASE("detection's last pass makes a cutter stopping inside the flank longer where the union grows, and only there") {
+  // A cover of one patch whose 12 mm cutter stops inside the 20 mm flank over a floor 3 mm under its
+  // tip: the pass tries it 1.2, 3, 6 and 13 mm longer (10%, 25%, 50% and to max_length 25 mm) and
+  // keeps the one that machines most of what no other patch covers. Beside a patch as tall as the
+  // flank that machines the same strip already, the union cannot grow: nothing is replaced.
+  Setup s;
+  const SurfaceIndex floor(to_unit(test::box_mesh({0, -20, -10}, {30, 80, -3}, 4), s.fr));
+  PatchOptions po = s.over_hub(floor);
+  po.fit.constraints.max_length = s.fr.length_to_unit(25);
+  PatchSpec short_lines = s.upright();
+  for (AxisLine& l : short_lines.lines) l.b = s.fr.to_unit({5, s.fr.to_mm(l.b).y(), 12});
+  const PatchFit low = fit_patch(s.phi, short_lines, po), tall = fit_patch(s.phi, s.upright(), po);
+  REQUIRE(machinable(low));
+  REQUIRE(machinable(tall));
+  CoverOptions co;
+  co.patch = po;
+  std::vector<PatchFit> alone{low};
+  std::vector<size_t> seen;
+  const std::vector<size_t> replaced = reach_further(s.phi, alone, co, false, [&](size_t k) { seen.push_back(k); });
+  MESSAGE("coverage ", low.coverage, " -> ", alone[0].coverage, ", made ", s.fr.length_to_mm(alone[0].reach_lengthened),
+          " mm longer; the tall patch: ", tall.coverage);
+  CHECK(seen == std::vector<size_t>{0});
+  CHECK(replaced == std::vector<size_t>{0});
+  CHECK(low.coverage < 0.5);
+  CHECK(alone[0].coverage >= 0.9 * 0.75);  // the motion's 75% of the flank, to its top edge
+  CHECK(s.fr.length_to_mm(alone[0].reach_lengthened) == doctest::Approx(13).epsilon(1e-6));
+  CHECK(s.fr.length_to_mm(alone[0].fit.rails.length) <= 25 + 1e-6);
+  CHECK(machinable(alone[0]));
+  CHECK(s.lowest_tip_z(alone[0].fit.rails) == doctest::Approx(s.lowest_tip_z(low.fit.rails)).epsilon(1e-9));
+  // The tall patch machines the strip above 12 mm already.
+  std::vector<PatchFit> beside{low, tall};
+  CHECK(reach_further(s.phi, beside, co, false).empty());
+  CHECK(beside[0].reach_lengthened == 0.0);
+  CHECK(beside[0].fit.rails.length == low.fit.rails.length);
+  // Without a part, or with a shared tool: no pass.
+  std::vector<PatchFit> again{low};
+  co.shared_tool = true;
+  CHECK(reach_further(s.phi, again, co, false).empty());
+  co.shared_tool = false;
+  co.patch = s.patch_options();
+  CHECK(reach_further(s.phi, again, co, false).empty());
+  CHECK(again[0].reach_lengthened == 0.0);
 }
 
 TEST_CASE("a tip lengthened towards a floor and ground back where it meets it reports the net change against the fitted tool") {
