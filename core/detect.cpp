@@ -937,6 +937,10 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
     thin.initial = start;
     FitOptions held = pull.fit;
     held.constraints.max_tip_radius = narrow;
+    // The floor's pull reaches as far as it did for the wide tip: the narrow tip starts where the wide
+    // one stood, its lowest point (the wide rim's dip) up to that tip's radius above the floor, beyond
+    // the narrow tip's own reach, and floated there.
+    held.check.floor_reach *= std::max(1.0, f.fit.fit.tool.d(0) / narrow);
     // Judged with the tool's own limits (po): where the part has the tip ground shorter it widens.
     refit(std::move(thin), start, held);
   }
@@ -1000,10 +1004,19 @@ Eigen::Matrix3d extent_axes(const TriMesh& m) {
 
 }  // namespace
 
-std::vector<size_t> reach_further(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
-                                  bool end_swept, const std::function<void(size_t)>& on_patch) {
+namespace {
+// Each round's best goes through the floor pass (floor_finished), judged there with the tool's end swept.
+bool floor_pass_on(const CoverOptions& o) {
+  return o.end && o.floor_pass && o.patch.fit.check.part && o.patch.fit.check.floor_reach > 0 && !o.patch.fit.fixed_tool;
+}
+}  // namespace
+
+std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
+                                 const std::function<void(size_t)>& on_patch) {
   std::vector<size_t> replaced;
-  if (!o.reach_further || !o.patch.fit.check.part || o.patch.fit.fixed_tool || o.shared_tool) return replaced;
+  if (!o.patch.fit.check.part || o.patch.fit.fixed_tool || o.shared_tool) return replaced;
+  const bool floor = floor_pass_on(o), further = o.reach_further;
+  if (!floor && !further) return replaced;
   const TriMesh& m = surface.mesh();
   const size_t nv = m.vertices.size();
   const std::vector<double> area = vertex_areas(m);
@@ -1023,11 +1036,20 @@ std::vector<size_t> reach_further(const SurfaceIndex& surface, std::vector<Patch
     Fitted f;
     f.fit = cover[k];
     f.gain = gain_of(f.fit, others, area, tol);
-    Fitted longer = reaching_further(surface, std::move(f), others, area, o, end_swept);
-    if (!(longer.fit.reach_lengthened > cover[k].reach_lengthened)) continue;
-    if (const double c = union_coverage(k, &longer.fit); c > now) {
-      cover[k] = std::move(longer.fit);
-      now = c;
+    std::optional<Fitted> best;  // a variant under which the union grows most
+    double best_coverage = now;
+    const auto consider = [&](Fitted g) {
+      if (const double c = union_coverage(k, &g.fit); c > best_coverage) best_coverage = c, best = std::move(g);
+    };
+    if (floor) consider(floor_finished(surface, f, others, area, o));
+    if (further) {
+      const Fitted& base = best ? *best : f;
+      Fitted longer = reaching_further(surface, base, others, area, o, floor);
+      if (longer.fit.reach_lengthened > base.fit.reach_lengthened) consider(std::move(longer));
+    }
+    if (best) {
+      cover[k] = std::move(best->fit);
+      now = best_coverage;
       replaced.push_back(k);
     }
   }
@@ -1046,8 +1068,7 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
   const Eigen::Matrix3d extents = extent_axes(m);
   const Eigen::Vector3d width = o.width.value_or(Eigen::Vector3d(extents.col(1)));
   const double tol = o.patch.tolerance;
-  // Each round's best goes through the floor pass (floor_finished), judged there with the tool's end swept.
-  const bool floor_pass = o.end && o.floor_pass && o.patch.fit.check.part && o.patch.fit.check.floor_reach > 0 && !o.patch.fit.fixed_tool;
+  const bool floor_pass = floor_pass_on(o);
   Detection out;
   // The patches of the cover, in the order found.
   struct Chosen {
@@ -1498,21 +1519,21 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     report(out.joint_refit ? "joint refit kept" : "joint refit not kept (the held tool covers more)");
   }
 
-  // Once the cover is chosen, each patch's cutter made longer at its holder end where Φ goes on
-  // beyond it (reaching_further, against what the other patches cover), kept when the union's
-  // coverage grows. Offered to each round's best instead, the longer cutters won their rounds and
-  // the later rounds found less (the HECC impeller: 35.3% against 31.4% after the first round, 84.7%
-  // against 90.4% after the eighth), so it only adds to the cover the rounds chose. Not for a held
-  // (catalogue or shared) tool.
-  if (o.reach_further && o.patch.fit.check.part && !o.patch.fit.fixed_tool && !sharing) {
+  // Once the cover is chosen, each patch against what the others cover (finish_cover): the floor pass
+  // again and its cutter made longer at its holder end, kept when the union's coverage grows. Offered
+  // to each round's best instead, the longer cutters won their rounds and the later rounds found less
+  // (the HECC impeller: 35.3% against 31.4% after the first round, 84.7% against 90.4% after the
+  // eighth), so they only add to the cover the rounds chose. Not for a held (catalogue or shared) tool.
+  if (!sharing) {
     std::vector<PatchFit> cover;
     for (Chosen& c : chosen) cover.push_back(std::move(c.fit));
-    (void)reach_further(surface, cover, o, floor_pass, [&](size_t k) {
-      report("making patch " + std::to_string(k + 1) + "'s cutter longer where the surface goes on beyond it");
-    });
+    const std::vector<size_t> replaced =
+        finish_cover(surface, cover, o, [&](size_t k) { report("finishing patch " + std::to_string(k + 1) + " against the others"); });
     for (size_t k = 0; k < chosen.size(); ++k) chosen[k].fit = std::move(cover[k]);
-    update_union();
-    recount_gains();
+    if (!replaced.empty()) {
+      update_union();
+      recount_gains();
+    }
   }
 
   // Machining order: along Φ's longest extent (principal axis of the vertices).

@@ -69,8 +69,8 @@ struct CoverOptions {
   // is continued on the whole surface, as the round's best, where its end is judged.
   bool continue_ends = true;
   // With a part, once the cover is chosen: each patch with its cutter made longer at its holder end
-  // where that end stops inside Φ (detect.cpp, `reaching_further`; custom tools, not shared), kept
-  // when the union's coverage grows. Off for the one-patch search of an uncovered region.
+  // where that end stops inside Φ (finish_cover; custom tools, not shared), kept when the union's
+  // coverage grows. Off for the one-patch search of an uncovered region.
   bool reach_further = true;
   // The floor pass, with a part under the tools' tips (patch.fit.check.floor_reach > 0, a hub under a
   // blade's flank): candidates are fitted without the floor's pull on the tip; each round's best is
@@ -152,15 +152,19 @@ struct Detection {
 [[nodiscard]] Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& options,
                                        const std::function<void(const CoverProgress&)>& on_progress = {});
 
-// The last pass of detect_patches (CoverOptions::reach_further; with a part, custom tools not
-// shared): each patch of `cover` in turn, its cutter made longer at its holder end where that end's
-// column of Ω still lies over Φ (lengthened_to_reach: by 10%, 25%, 50% of its length and to the
-// tool's max_length), judged as a candidate against what the other patches cover; the one bringing
-// most of that is kept in `cover` when the union's coverage of Φ grows. `end_swept`: judged with
-// CoverOptions::end swept (as the floor pass judged the patches). `on_patch(k)` before patch k.
-// Returns the indices of the patches replaced, in order.
-std::vector<size_t> reach_further(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
-                                  bool end_swept, const std::function<void(size_t)>& on_patch = {});
+// The last pass of detect_patches, with a part, custom tools not shared: each patch of `cover` in
+// turn, against what the other patches cover, is offered
+//  - the floor pass again (CoverOptions::floor_pass, with `end` and the part's floor pull): fitted
+//    again with its tip pulled onto the floor, and with CoverOptions::floor_tip narrow, judged with
+//    the tool's end swept; a round chose its best by the area then uncovered, where a narrow tip's
+//    lower reach (the HECC impeller's hub rows) cost flank that later patches machine anyway;
+//  - then its cutter made longer at its holder end (CoverOptions::reach_further) where that end's
+//    column of Ω still lies over Φ (lengthened_to_reach: by 10%, 25%, 50% of its length and to the
+//    tool's max_length), judged as a candidate.
+// The variant under which the union's coverage of Φ grows most replaces the patch in `cover`.
+// `on_patch(k)` before patch k. Returns the indices of the patches replaced, in order.
+std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
+                                 const std::function<void(size_t)>& on_patch = {});
 
 // The union of several machined surfaces over Φ: owner and deviation per vertex (see Detection).
 struct UnionDeviation {

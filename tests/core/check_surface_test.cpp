@@ -644,7 +644,7 @@ TEST_CASE("detection's last pass makes a cutter stopping inside the flank longer
   co.patch = po;
   std::vector<PatchFit> alone{low};
   std::vector<size_t> seen;
-  const std::vector<size_t> replaced = reach_further(s.phi, alone, co, false, [&](size_t k) { seen.push_back(k); });
+  const std::vector<size_t> replaced = finish_cover(s.phi, alone, co, [&](size_t k) { seen.push_back(k); });
   MESSAGE("coverage ", low.coverage, " -> ", alone[0].coverage, ", made ", s.fr.length_to_mm(alone[0].reach_lengthened),
           " mm longer; the tall patch: ", tall.coverage);
   CHECK(seen == std::vector<size_t>{0});
@@ -657,17 +657,89 @@ TEST_CASE("detection's last pass makes a cutter stopping inside the flank longer
   CHECK(s.lowest_tip_z(alone[0].fit.rails) == doctest::Approx(s.lowest_tip_z(low.fit.rails)).epsilon(1e-9));
   // The tall patch machines the strip above 12 mm already.
   std::vector<PatchFit> beside{low, tall};
-  CHECK(reach_further(s.phi, beside, co, false).empty());
+  CHECK(finish_cover(s.phi, beside, co).empty());
   CHECK(beside[0].reach_lengthened == 0.0);
   CHECK(beside[0].fit.rails.length == low.fit.rails.length);
   // Without a part, or with a shared tool: no pass.
   std::vector<PatchFit> again{low};
   co.shared_tool = true;
-  CHECK(reach_further(s.phi, again, co, false).empty());
+  CHECK(finish_cover(s.phi, again, co).empty());
   co.shared_tool = false;
   co.patch = s.patch_options();
-  CHECK(reach_further(s.phi, again, co, false).empty());
+  CHECK(finish_cover(s.phi, again, co).empty());
   CHECK(again[0].reach_lengthened == 0.0);
+}
+
+TEST_CASE("detection's last pass fits a wide tip again narrow where another patch machines the flank above, and it reaches lower") {
+  // The plane x = 0.25 z (y 0..60, z 0..30 mm) over the floor z <= 0, the tool on its +x side: they
+  // meet at 76 degrees. A flat end square to an axis along the flank dips with its rim away from it:
+  // a Ø10 tip leaves its rim at the flank 2.4 mm above the floor. The cover: a patch fitted from
+  // lines with a tool up to Ø10 (z 2.5 to 28 mm), and one from lines higher up the flank. Alone, a
+  // narrow tip on the floor cost the first patch as much at the top of the flank as it brought at the
+  // bottom (its cutter as long, 2 mm lower); against the patch above, the last pass (floor_tip Ø1.5)
+  // fits it again so, and the union grows by the rows it reaches lower.
+  const TriMesh phi_mm = test::grid_mesh(41, 61, [](int j, int k) { return Eigen::Vector3d(0.125 * k, 1.5 * j, 0.5 * k); });
+  const Similarity fr = unit_diagonal_frame(phi_mm);
+  const SurfaceIndex phi(transformed(phi_mm, fr));
+  const SurfaceIndex floor(to_unit(test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4), fr));
+  const Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
+  // Lines 5 mm off the flank along its normal, `along` mm up it from z = `z0`.
+  const auto lines = [&](double z0, double along) {
+    PatchSpec spec;
+    spec.name = "p";
+    for (double y : {3.0, 30.0, 57.0}) {
+      const Eigen::Vector3d a = Eigen::Vector3d(0.25 * z0, y, z0) + 5 * n;
+      spec.lines.push_back({fr.to_unit(a), fr.to_unit(a + along * up)});
+    }
+    return spec;
+  };
+  PatchOptions po;
+  po.fit.shape = ToolShape::General;
+  po.fit.constraints.max_radius = fr.length_to_unit(5);
+  po.fit.check.part = &floor;
+  po.fit.check.tolerance = fr.length_to_unit(0.02);
+  po.fit.check.floor_reach = 1;
+  po.fit.check.floor_height = fr.length_to_unit(0.01);
+  po.tolerance = fr.length_to_unit(0.02);
+  po.orient_by_part = true;
+  const PatchFit wide = fit_patch(phi, lines(0, 30), po), above = fit_patch(phi, lines(12, 20), po);
+  REQUIRE(machinable(wide));
+  REQUIRE(machinable(above));
+  // The lowest z (mm) of the flank a patch brings within 0.02 mm, and the union's coverage.
+  const auto lowest = [&](const PatchFit& f) {
+    double z = INFINITY;
+    for (size_t v = 0; v < phi_mm.vertices.size(); ++v)
+      if (std::isfinite(f.machined.design_deviation[v]) && std::abs(f.machined.design_deviation[v]) <= po.tolerance)
+        z = std::min(z, phi_mm.vertices[v].z());
+    return z;
+  };
+  const auto union_coverage = [&](const std::vector<PatchFit>& c) {
+    std::vector<const MachinedSurface*> ms;
+    for (const PatchFit& f : c) ms.push_back(&f.machined);
+    return coverage(phi.mesh(), union_deviation(ms, phi_mm.vertices.size()).deviation, po.tolerance);
+  };
+  const auto tip_mm = [&](const PatchFit& f) { return 2 * fr.length_to_mm(std::min(f.fit.tool.d(0), f.fit.tool.d(1))); };
+  CoverOptions co;
+  co.patch = po;
+  co.end = ToolEnd{};
+  co.floor_tip = fr.length_to_unit(0.75);
+  co.reach_further = false;
+  const std::vector<PatchFit> before{wide, above};
+  std::vector<PatchFit> cover = before;
+  const std::vector<size_t> replaced = finish_cover(phi, cover, co);
+  MESSAGE("wide: tip Ø", tip_mm(wide), " mm, lowest z ", lowest(wide), " mm; after the pass: tip Ø", tip_mm(cover[0]),
+          " mm, lowest z ", lowest(cover[0]), " mm; union ", union_coverage(before), " -> ", union_coverage(cover));
+  CHECK(lowest(wide) >= 2.0);
+  REQUIRE(!replaced.empty());
+  CHECK(replaced[0] == 0);
+  CHECK(tip_mm(cover[0]) <= 1.5 + 1e-6);
+  CHECK(lowest(cover[0]) <= 1.0);
+  CHECK(union_coverage(cover) > union_coverage(before) + 0.02);
+  CHECK(machinable(cover[0]));
+  // Without the floor pass (no end swept): nothing to offer.
+  co.end.reset();
+  std::vector<PatchFit> plain = before;
+  CHECK(finish_cover(phi, plain, co).empty());
 }
 
 TEST_CASE("a tip lengthened towards a floor and ground back where it meets it reports the net change against the fitted tool") {
