@@ -1002,13 +1002,11 @@ Eigen::Matrix3d extent_axes(const TriMesh& m) {
   return Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(C).eigenvectors();
 }
 
-}  // namespace
-
-namespace {
 // Each round's best goes through the floor pass (floor_finished), judged there with the tool's end swept.
 bool floor_pass_on(const CoverOptions& o) {
   return o.end && o.floor_pass && o.patch.fit.check.part && o.patch.fit.check.floor_reach > 0 && !o.patch.fit.fixed_tool;
 }
+
 }  // namespace
 
 std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
