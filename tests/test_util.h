@@ -138,6 +138,12 @@ inline TriMesh leaning_flank() {
 }
 inline TriMesh floor_under_leaning_flank() { return box_mesh({-30, -20, -20}, {60, 80, 0}, 4); }
 
+// The plane x = 0.25 z (y 0..60, z 0..30 mm), 41 x 61 vertices: on its +x side it meets the floor
+// z <= 0 (floor_under_leaning_flank) at 76 degrees, a flank leaning over its hub.
+inline TriMesh steep_flank() {
+  return grid_mesh(41, 61, [](int j, int k) { return Eigen::Vector3d(0.125 * k, 1.5 * j, 0.5 * k); });
+}
+
 // The height (z) of a flat end's lowest rim point: the tip face centred at `tip`, square to the unit
 // `axis`, of radius `radius`.
 inline double lowest_rim_z(const Eigen::Vector3d& tip, const Eigen::Vector3d& axis, double radius) {

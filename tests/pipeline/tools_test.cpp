@@ -385,13 +385,13 @@ TEST_CASE("a corner end larger than the free fit's tip allows is held in the fit
 // The plane x = 0.25 z (y 0..60, z 0..30 mm) over the floor z <= 0, the tool on its +x side: the
 // flank meets the floor at 76 degrees. A flat end square to an axis along the flank dips with the rim
 // away from it, and the rim at the flank stands 2 r sin(14 deg) above the floor: 2.4 mm for a Ø10 tip.
-struct LeaningFlank {
+struct SteepFlank {
   test::ScratchDir dir{"max-tip"};
   Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
   std::string detected;  // the last run's detected-job.yaml (patches: auto)
-  LeaningFlank() {
-    write_obj(dir.file("flank.obj"), test::grid_mesh(41, 61, [](int j, int k) { return Eigen::Vector3d(0.125 * k, 1.5 * j, 0.5 * k); }));
-    write_obj(dir.file("floor.obj"), test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4));
+  SteepFlank() {
+    write_obj(dir.file("flank.obj"), test::steep_flank());
+    write_obj(dir.file("floor.obj"), test::floor_under_leaning_flank());
   }
   // The job's patch p: its tip and top diameters (mm), the lowest z of the flank within 0.02 mm, its
   // tool's limits met (report) and the patch machinable.
@@ -439,7 +439,7 @@ struct LeaningFlank {
 TEST_CASE("max_tip_diameter: a flat end beside a flank leaning over its floor reaches lower with a narrow tip" * doctest::test_suite("heavy")) {
   // Measured: the Ø10 cylinder the fit takes reaches z 2.5 mm (78.8% of the flank); its tip at most
   // Ø2 mm, the cone (Ø1.77 to Ø9.96) reaches z 1.0 mm (85.2%).
-  LeaningFlank f;
+  SteepFlank f;
   const std::string patches = f.listed_patch();
   const auto wide = f.lowest_reached("{shape: cone, max_diameter: 10}", patches);
   const auto narrow = f.lowest_reached("{shape: cone, max_diameter: 10, max_tip_diameter: 2}", patches);
@@ -451,7 +451,7 @@ TEST_CASE("max_tip_diameter: a flat end beside a flank leaning over its floor re
 TEST_CASE("max_tip_diameter holds the tip as ground: a listed cone widening from its tip, no part to refit against") {
   // The flank alone: the fit's own cone, its d held at Ø2 at the tip, was ground Ø2.018 mm there
   // (the spheres above the tip reach out beyond d in the tip plane) while the report said "met".
-  LeaningFlank f;
+  SteepFlank f;
   const std::string patches = f.listed_patch();
   const pipeline::FitRun run = fit_job_file(
       f.dir, "surface: flank.obj\ntolerance: 0.02\ntool: {shape: cone, max_diameter: 10, max_tip_diameter: 2}\n" + patches);
@@ -473,7 +473,7 @@ TEST_CASE("max_tip_diameter with patches: auto: detection holds the narrow tip a
   // 0.02 mm z 1.0 mm; with max_tip_diameter 2 a tip of Ø1.49 widening to Ø4.04 mm at the holder end
   // (dip 0.36 mm), z 0.5 mm, 99.2% of the flank.
   // (The run without the limit is not repeated here: CI's time.)
-  LeaningFlank f;
+  SteepFlank f;
   const auto narrow = f.lowest_reached("{max_diameter: 10, max_tip_diameter: 2}", "cover: {max_patches: 1}\npatches: auto\n");
   CHECK(narrow.tip <= 2 + 1e-6);
   CHECK(narrow.top >= 3);  // the limit holds at the tip alone
@@ -485,7 +485,7 @@ TEST_CASE("max_tip_diameter with patches: auto: detection holds the narrow tip a
 TEST_CASE("cover.floor_tip_diameter: the floor pass also tries each round's best with a narrow tip, and keeps it where it reaches lower" * doctest::test_suite("heavy")) {
   // The same flank, no limit on the tip: detection's own Ø3.02 mm tip reaches z 1.0 mm (97.5%); the
   // floor pass's narrow variant (at most Ø1.5 mm, pulled onto the floor) brings more and is the patch.
-  LeaningFlank f;
+  SteepFlank f;
   const auto narrow = f.lowest_reached("{max_diameter: 10}", "cover: {max_patches: 1, floor_tip_diameter: 1.5}\npatches: auto\n");
   CHECK(narrow.tip <= 1.5 + 1e-6);
   CHECK(narrow.top > 2);
