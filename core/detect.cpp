@@ -1,5 +1,6 @@
 #include "core/detect.h"
 
+#include <cstdlib>
 #include <Eigen/Dense>
 #include <fmt/format.h>
 #include <algorithm>
@@ -46,6 +47,7 @@ std::string CoverOptions::validate() const {
   if (lines < 2) return "cover.lines: at least 2";
   if (spares < 0) return "cover.spares: must be >= 0";
   if (exchanges < 0) return "cover.exchanges: must be >= 0";
+  if (finish_sweeps < 0) return "cover.finish_sweeps: must be >= 0";
   if (regions < 0) return "cover.regions: must be >= 0";
   if (!(region_min > 0 && region_min <= 1)) return "cover.region_min: must be in (0, 1]";
   if (!(region_below >= 0 && region_below <= 1)) return "cover.region_below: must be in [0, 1]";
@@ -899,18 +901,22 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
 // The floor pass (CoverOptions::end): the round's best judged again with the tool's end swept, and
 // fitted again from its motion with the tip pulled onto the part's floor (its tool free), judged so
 // too; with CoverOptions::floor_tip also with a narrow tip, pulled so; the one that brings most
-// uncovered area is kept. A held tool (catalogue or shared) is left as it is.
+// uncovered area is kept. A held tool (catalogue or shared) is left as it is. The winner's cutter is
+// then offered longer at its tip; `lengthen_each` (the last pass, finish_cover): every variant's.
 Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<char>& covered, const std::vector<double>& area,
-                      const CoverOptions& o) {
+                      const CoverOptions& o, bool lengthen_each = false) {
   PatchOptions po = candidate_options(o);
   po.machined.end = o.end;
   // with_check has turned the fit so that its tip is the a end: kept so, the tip's limits held there.
   tip_held_at_a(po, f.fit.fit.rails);
   Fitted best;
+  std::vector<PatchFit> variants;  // each judged machinable, before the tips are lengthened
+  bool lengthening = false;
   const auto offer = [&](PatchFit p) {
     std::optional<PatchFit> j = judged(surface, std::move(p), po);
     if (!j || !machinable(*j)) return;
     const double g = gain_of(*j, covered, area, po.tolerance);
+    if (lengthen_each && !lengthening) variants.push_back(*j);
     if (!best.ok || g > best.gain) best.fit = std::move(*j), best.gain = g, best.ok = true;
   };
   // `p` fitted again from `start` with `fit` (its iterations counted on f's) and offered; a motion
@@ -947,10 +953,12 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
   // The winner's cutter made longer at its tip (lengthened_at_tip) by 5%, 10% and 20% of its length:
   // a tip that stops short of the floor (rotor 37's hub rows, 1-3 mm of flank left under tips that
   // kept clear) reaches down to it, and with_check grinds back what would meet the part.
+  lengthening = true;
   if (best.ok) {
-    const PatchFit winner = best.fit;
-    for (const double g : {0.05, 0.1, 0.2})
-      if (std::optional<PatchFit> l = lengthened_at_tip(winner, po, g * winner.fit.rails.length)) offer(std::move(*l));
+    if (!lengthen_each) variants = {best.fit};
+    for (const PatchFit& v : variants)
+      for (const double g : {0.05, 0.1, 0.2})
+        if (std::optional<PatchFit> l = lengthened_at_tip(v, po, g * v.fit.rails.length)) offer(std::move(*l));
   }
   if (!best.ok) return f;
   best.cut = f.cut;
@@ -1010,7 +1018,7 @@ bool floor_pass_on(const CoverOptions& o) {
 }  // namespace
 
 std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
-                                 const std::function<void(size_t)>& on_patch) {
+                                 const std::function<void(size_t, double)>& on_patch) {
   std::vector<size_t> replaced;
   if (!o.patch.fit.check.part || o.patch.fit.fixed_tool || o.shared_tool) return replaced;
   const bool floor = floor_pass_on(o), further = o.reach_further;
@@ -1026,30 +1034,46 @@ std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchF
     return coverage(m, union_deviation(ms, nv).deviation, tol);
   };
   double now = union_coverage(cover.size(), nullptr);
-  for (size_t k = 0; k < cover.size(); ++k) {
-    if (on_patch) on_patch(k);
-    std::vector<char> others(nv, 0);
-    for (size_t j = 0; j < cover.size(); ++j)
-      if (j != k) mark_covered(cover[j], tol, others);
-    Fitted f;
-    f.fit = cover[k];
-    f.gain = gain_of(f.fit, others, area, tol);
-    std::optional<Fitted> best;  // a variant under which the union grows most
-    double best_coverage = now;
-    const auto consider = [&](Fitted g) {
-      if (const double c = union_coverage(k, &g.fit); c > best_coverage) best_coverage = c, best = std::move(g);
-    };
-    if (floor) consider(floor_finished(surface, f, others, area, o));
-    if (further) {
-      const Fitted& base = best ? *best : f;
-      Fitted longer = reaching_further(surface, base, others, area, o, floor);
-      if (longer.fit.reach_lengthened > base.fit.reach_lengthened) consider(std::move(longer));
+  // A patch is judged again once another has been replaced since it was last judged (patches replaced
+  // after it change what it is judged against): sweeps over the cover until none is (finish_sweeps).
+  const size_t n = cover.size();
+  std::vector<long> judged_at(n, -1), replaced_at(n, -1);
+  long changes = 0;
+  for (int sweep = 0; sweep < o.finish_sweeps; ++sweep) {
+    bool any = false;
+    for (size_t k = 0; k < n; ++k) {
+      bool stale = judged_at[k] < 0;
+      for (size_t j = 0; j < n && !stale; ++j) stale = j != k && replaced_at[j] > judged_at[k];
+      if (!stale) continue;
+      any = true;
+      if (on_patch) on_patch(k, now);
+      std::vector<char> others(nv, 0);
+      for (size_t j = 0; j < n; ++j)
+        if (j != k) mark_covered(cover[j], tol, others);
+      Fitted f;
+      f.fit = cover[k];
+      f.gain = gain_of(f.fit, others, area, tol);
+      std::optional<Fitted> best;  // a variant under which the union grows most
+      double best_coverage = now;
+      const auto consider = [&](Fitted g) {
+        if (const double c = union_coverage(k, &g.fit); c > best_coverage) best_coverage = c, best = std::move(g);
+      };
+      if (floor) consider(floor_finished(surface, f, others, area, o, true));
+      if (further) {
+        const Fitted& base = best ? *best : f;
+        Fitted longer = reaching_further(surface, base, others, area, o, floor);
+        if (longer.fit.reach_lengthened > base.fit.reach_lengthened) consider(std::move(longer));
+      }
+      judged_at[k] = changes;
+      if (best) {
+        cover[k] = std::move(best->fit);
+        now = best_coverage;
+        replaced.push_back(k);
+        replaced_at[k] = ++changes;
+        judged_at[k] = changes;
+      }
     }
-    if (best) {
-      cover[k] = std::move(best->fit);
-      now = best_coverage;
-      replaced.push_back(k);
-    }
+    if (!any) break;
   }
   return replaced;
 }
@@ -1526,7 +1550,10 @@ Detection detect_patches(const SurfaceIndex& surface, const CoverOptions& option
     std::vector<PatchFit> cover;
     for (Chosen& c : chosen) cover.push_back(std::move(c.fit));
     const std::vector<size_t> replaced =
-        finish_cover(surface, cover, o, [&](size_t k) { report("finishing patch " + std::to_string(k + 1) + " against the others"); });
+        finish_cover(surface, cover, o, [&](size_t k, double now) {
+          out.coverage = now;
+          report("finishing patch " + std::to_string(k + 1) + " against the others");
+        });
     for (size_t k = 0; k < chosen.size(); ++k) chosen[k].fit = std::move(cover[k]);
     if (!replaced.empty()) {
       update_union();

@@ -72,6 +72,9 @@ struct CoverOptions {
   // where that end stops inside Φ (finish_cover; custom tools, not shared), kept when the union's
   // coverage grows. Off for the one-patch search of an uncovered region.
   bool reach_further = true;
+  // The last pass sweeps the cover again while a patch was replaced since another was last judged
+  // (what that one is judged against has changed), at most this many sweeps.
+  int finish_sweeps = 3;
   // The floor pass, with a part under the tools' tips (patch.fit.check.floor_reach > 0, a hub under a
   // blade's flank): candidates are fitted without the floor's pull on the tip; each round's best is
   // fitted again from its motion with it, both judged with the tool's `end` swept (as the program cuts:
@@ -157,14 +160,16 @@ struct Detection {
 //  - the floor pass again (CoverOptions::floor_pass, with `end` and the part's floor pull): fitted
 //    again with its tip pulled onto the floor, and with CoverOptions::floor_tip narrow, judged with
 //    the tool's end swept; a round chose its best by the area then uncovered, where a narrow tip's
-//    lower reach (the HECC impeller's hub rows) cost flank that later patches machine anyway;
-//  - then its cutter made longer at its holder end (CoverOptions::reach_further) where that end's
-//    column of Ω still lies over Φ (lengthened_to_reach: by 10%, 25%, 50% of its length and to the
-//    tool's max_length), judged as a candidate.
-// The variant under which the union's coverage of Φ grows most replaces the patch in `cover`.
-// `on_patch(k)` before patch k. Returns the indices of the patches replaced, in order.
+//    lower reach (the HECC impeller's hub rows) cost flank that later patches machine anyway. Each
+//    of these variants (the patch as it is, pulled, narrow) also with its cutter made longer at its
+//    tip (lengthened_at_tip), not only the one that brings most;
+//  - then the winner with its cutter made longer at its holder end (CoverOptions::reach_further)
+//    where that end's column of Ω still lies over Φ (lengthened_to_reach: by 10%, 25%, 50% of its
+//    length and to the tool's max_length), judged as a candidate.
+// The variant under which the union's coverage of Φ grows most replaces the patch in `cover`. A
+// patch is judged again once another has been replaced since (CoverOptions::finish_sweeps).
 std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
-                                 const std::function<void(size_t)>& on_patch = {});
+                                 const std::function<void(size_t, double)>& on_patch = {});
 
 // The union of several machined surfaces over Φ: owner and deviation per vertex (see Detection).
 struct UnionDeviation {

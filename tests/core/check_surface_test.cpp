@@ -644,7 +644,7 @@ TEST_CASE("detection's last pass makes a cutter stopping inside the flank longer
   co.patch = po;
   std::vector<PatchFit> alone{low};
   std::vector<size_t> seen;
-  const std::vector<size_t> replaced = finish_cover(s.phi, alone, co, [&](size_t k) { seen.push_back(k); });
+  const std::vector<size_t> replaced = finish_cover(s.phi, alone, co, [&](size_t k, double) { seen.push_back(k); });
   MESSAGE("coverage ", low.coverage, " -> ", alone[0].coverage, ", made ", s.fr.length_to_mm(alone[0].reach_lengthened),
           " mm longer; the tall patch: ", tall.coverage);
   CHECK(seen == std::vector<size_t>{0});
@@ -678,10 +678,10 @@ TEST_CASE("detection's last pass fits a wide tip again narrow where another patc
   // narrow tip on the floor cost the first patch as much at the top of the flank as it brought at the
   // bottom (its cutter as long, 2 mm lower); against the patch above, the last pass (floor_tip Ø1.5)
   // fits it again so, and the union grows by the rows it reaches lower.
-  const TriMesh phi_mm = test::grid_mesh(41, 61, [](int j, int k) { return Eigen::Vector3d(0.125 * k, 1.5 * j, 0.5 * k); });
+  const TriMesh phi_mm = test::steep_flank();
   const Similarity fr = unit_diagonal_frame(phi_mm);
   const SurfaceIndex phi(transformed(phi_mm, fr));
-  const SurfaceIndex floor(to_unit(test::box_mesh({-30, -20, -20}, {60, 80, 0}, 4), fr));
+  const SurfaceIndex floor(to_unit(test::floor_under_leaning_flank(), fr));
   const Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
   // Lines 5 mm off the flank along its normal, `along` mm up it from z = `z0`.
   const auto lines = [&](double z0, double along) {
@@ -728,7 +728,8 @@ TEST_CASE("detection's last pass fits a wide tip again narrow where another patc
   std::vector<PatchFit> cover = before;
   const std::vector<size_t> replaced = finish_cover(phi, cover, co);
   MESSAGE("wide: tip Ø", tip_mm(wide), " mm, lowest z ", lowest(wide), " mm; after the pass: tip Ø", tip_mm(cover[0]),
-          " mm, lowest z ", lowest(cover[0]), " mm; union ", union_coverage(before), " -> ", union_coverage(cover));
+          " mm, lowest z ", lowest(cover[0]), " mm; union ", union_coverage(before), " -> ", union_coverage(cover), "; the patch above: lowest z ", lowest(above), " -> ", lowest(cover[1]), " mm, its cutter made ",
+          fr.length_to_mm(cover[1].tip_lengthened), " mm longer at its tip");
   CHECK(lowest(wide) >= 2.0);
   REQUIRE(!replaced.empty());
   CHECK(replaced[0] == 0);
@@ -736,10 +737,98 @@ TEST_CASE("detection's last pass fits a wide tip again narrow where another patc
   CHECK(lowest(cover[0]) <= 1.0);
   CHECK(union_coverage(cover) > union_coverage(before) + 0.02);
   CHECK(machinable(cover[0]));
+  // The patch above, judged against the narrow one below it: each variant of its floor pass is
+  // offered longer at its tip, not only the one that brings most (that one reached z 11.5 mm, 1 mm
+  // longer): 4 mm longer, it reaches z 8.5 mm.
+  REQUIRE(replaced == std::vector<size_t>{0, 1});
+  CHECK(lowest(cover[1]) <= 9.0);
+  CHECK(fr.length_to_mm(cover[1].tip_lengthened) >= 3.0);
+  CHECK(machinable(cover[1]));
   // Without the floor pass (no end swept): nothing to offer.
   co.end.reset();
   std::vector<PatchFit> plain = before;
   CHECK(finish_cover(phi, plain, co).empty());
+}
+
+TEST_CASE("detection's last pass judges a patch again once a patch after it was replaced, and the union grows") {
+  // test::steep_flank over its floor (z 0..30 mm). The cover: a patch high up the flank (a Ø10 tip
+  // at z 16 mm, 13.5 mm long: up to z 29) judged first, and one up the whole flank (Ø10 tip: from
+  // z 2.5 mm to the top) after it. First sweep: the high patch's cutter made longer brings nothing
+  // (the long patch machines the top); the long patch fitted again narrow on the floor stands 2 mm
+  // lower and reaches z 0.5 mm, its top now short of the flank's. The second sweep judges the high
+  // patch again, against that: its cutter made longer machines the top strip.
+  const TriMesh phi_mm = test::steep_flank();
+  const Similarity fr = unit_diagonal_frame(phi_mm);
+  const SurfaceIndex phi(transformed(phi_mm, fr));
+  const SurfaceIndex floor(to_unit(test::floor_under_leaning_flank(), fr));
+  const Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
+  // Lines 5 mm off the flank along its normal, `along` mm up it from z = `z0`.
+  const auto lines = [&](double z0, double along) {
+    PatchSpec spec;
+    spec.name = "p";
+    for (double y : {3.0, 30.0, 57.0}) {
+      const Eigen::Vector3d a = Eigen::Vector3d(0.25 * z0, y, z0) + 5 * n;
+      spec.lines.push_back({fr.to_unit(a), fr.to_unit(a + along * up)});
+    }
+    return spec;
+  };
+  PatchOptions po;
+  po.fit.shape = ToolShape::General;
+  po.fit.constraints.max_radius = fr.length_to_unit(5);
+  po.fit.constraints.max_length = fr.length_to_unit(31);
+  po.fit.check.part = &floor;
+  po.fit.check.tolerance = fr.length_to_unit(0.02);
+  po.fit.check.floor_reach = 1;
+  po.fit.check.floor_height = fr.length_to_unit(0.01);
+  po.tolerance = fr.length_to_unit(0.02);
+  po.orient_by_part = true;
+  const PatchFit high = fit_patch(phi, lines(16, 13.5), po), whole = fit_patch(phi, lines(0, 31), po);
+  REQUIRE(machinable(high));
+  REQUIRE(machinable(whole));
+  // The lowest and highest z (mm) of the flank a patch brings within 0.02 mm, and the union's coverage.
+  const auto reach = [&](const PatchFit& f) {
+    double lo = INFINITY, hi = -INFINITY;
+    for (size_t v = 0; v < phi_mm.vertices.size(); ++v)
+      if (std::isfinite(f.machined.design_deviation[v]) && std::abs(f.machined.design_deviation[v]) <= po.tolerance)
+        lo = std::min(lo, phi_mm.vertices[v].z()), hi = std::max(hi, phi_mm.vertices[v].z());
+    return std::pair{lo, hi};
+  };
+  const auto union_coverage = [&](const std::vector<PatchFit>& c) {
+    std::vector<const MachinedSurface*> ms;
+    for (const PatchFit& f : c) ms.push_back(&f.machined);
+    return coverage(phi.mesh(), union_deviation(ms, phi_mm.vertices.size()).deviation, po.tolerance);
+  };
+  CHECK(reach(high).second == doctest::Approx(29));
+  CHECK(reach(whole) == std::pair{2.5, 30.0});
+  CoverOptions co;
+  co.patch = po;
+  co.end = ToolEnd{};
+  co.floor_tip = fr.length_to_unit(0.75);
+  const auto finished = [&](int sweeps, std::vector<size_t>& seen, std::vector<size_t>& replaced) {
+    co.finish_sweeps = sweeps;
+    std::vector<PatchFit> cover{high, whole};
+    replaced = finish_cover(phi, cover, co, [&](size_t k, double) { seen.push_back(k); });
+    MESSAGE(sweeps, " sweeps: union ", union_coverage({high, whole}), " -> ", union_coverage(cover), "; high z ", reach(cover[0]).first,
+            "..", reach(cover[0]).second, " mm, made ", fr.length_to_mm(cover[0].reach_lengthened), " mm longer; whole z ",
+            reach(cover[1]).first, "..", reach(cover[1]).second, " mm");
+    return cover;
+  };
+  std::vector<size_t> seen1, replaced1, seen3, replaced3;
+  const std::vector<PatchFit> one = finished(1, seen1, replaced1), three = finished(3, seen3, replaced3);
+  // One sweep: the long patch replaced, narrow on the floor; its top and the high patch's stop short.
+  CHECK(seen1 == std::vector<size_t>{0, 1});
+  CHECK(replaced1 == std::vector<size_t>{1});
+  CHECK(reach(one[1]).first <= 1.0);
+  CHECK(reach(one[1]).second < 29);
+  CHECK(reach(one[0]).second == doctest::Approx(29));
+  // Three: the high patch judged again and made longer (the second sweep), then the long one judged
+  // again against it; nothing was replaced since, so no third sweep.
+  CHECK(seen3 == std::vector<size_t>{0, 1, 0, 1});
+  CHECK(replaced3 == std::vector<size_t>{1, 0});
+  CHECK(reach(three[0]).second == doctest::Approx(30));
+  CHECK(three[0].reach_lengthened > 0);
+  CHECK(machinable(three[0]));
+  CHECK(union_coverage(three) > union_coverage(one) + 0.015);
 }
 
 TEST_CASE("a tip lengthened towards a floor and ground back where it meets it reports the net change against the fitted tool") {
