@@ -1,6 +1,5 @@
 #include "core/detect.h"
 
-#include <cstdlib>
 #include <Eigen/Dense>
 #include <fmt/format.h>
 #include <algorithm>

@@ -670,147 +670,126 @@ TEST_CASE("detection's last pass makes a cutter stopping inside the flank longer
   CHECK(again[0].reach_lengthened == 0.0);
 }
 
-TEST_CASE("detection's last pass fits a wide tip again narrow where another patch machines the flank above, and it reaches lower") {
-  // The plane x = 0.25 z (y 0..60, z 0..30 mm) over the floor z <= 0, the tool on its +x side: they
-  // meet at 76 degrees. A flat end square to an axis along the flank dips with its rim away from it:
-  // a Ø10 tip leaves its rim at the flank 2.4 mm above the floor. The cover: a patch fitted from
-  // lines with a tool up to Ø10 (z 2.5 to 28 mm), and one from lines higher up the flank. Alone, a
-  // narrow tip on the floor cost the first patch as much at the top of the flank as it brought at the
-  // bottom (its cutter as long, 2 mm lower); against the patch above, the last pass (floor_tip Ø1.5)
-  // fits it again so, and the union grows by the rows it reaches lower.
-  const TriMesh phi_mm = test::steep_flank();
-  const Similarity fr = unit_diagonal_frame(phi_mm);
-  const SurfaceIndex phi(transformed(phi_mm, fr));
-  const SurfaceIndex floor(to_unit(test::floor_under_leaning_flank(), fr));
-  const Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
-  // Lines 5 mm off the flank along its normal, `along` mm up it from z = `z0`.
-  const auto lines = [&](double z0, double along) {
+// test::steep_flank (the plane x = 0.25 z, y 0..60, z 0..30 mm) over its floor z <= 0, the tool on
+// its +x side: they meet at 76 degrees. A flat end square to an axis along the flank dips with its
+// rim away from it: a Ø10 tip leaves its rim at the flank 2.4 mm above the floor. Patches from axis
+// lines, general tools up to Ø10, judged against the floor within 0.02 mm.
+struct SteepFlankCover {
+  TriMesh phi_mm = test::steep_flank();
+  Similarity fr = unit_diagonal_frame(phi_mm);
+  SurfaceIndex phi{transformed(phi_mm, fr)};
+  SurfaceIndex floor{to_unit(test::floor_under_leaning_flank(), fr)};
+  Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
+  PatchOptions po;
+  SteepFlankCover(const SteepFlankCover&) = delete;  // po holds &floor
+  SteepFlankCover() {
+    po.fit.shape = ToolShape::General;
+    po.fit.constraints.max_radius = fr.length_to_unit(5);
+    po.fit.check.part = &floor;
+    po.fit.check.tolerance = fr.length_to_unit(0.02);
+    po.fit.check.floor_reach = 1;
+    po.fit.check.floor_height = fr.length_to_unit(0.01);
+    po.tolerance = fr.length_to_unit(0.02);
+    po.orient_by_part = true;
+  }
+  // The patch fitted from lines 5 mm off the flank along its normal, `along` mm up it from z = `z0`.
+  PatchFit fitted(double z0, double along) const {
     PatchSpec spec;
     spec.name = "p";
     for (double y : {3.0, 30.0, 57.0}) {
       const Eigen::Vector3d a = Eigen::Vector3d(0.25 * z0, y, z0) + 5 * n;
       spec.lines.push_back({fr.to_unit(a), fr.to_unit(a + along * up)});
     }
-    return spec;
-  };
-  PatchOptions po;
-  po.fit.shape = ToolShape::General;
-  po.fit.constraints.max_radius = fr.length_to_unit(5);
-  po.fit.check.part = &floor;
-  po.fit.check.tolerance = fr.length_to_unit(0.02);
-  po.fit.check.floor_reach = 1;
-  po.fit.check.floor_height = fr.length_to_unit(0.01);
-  po.tolerance = fr.length_to_unit(0.02);
-  po.orient_by_part = true;
-  const PatchFit wide = fit_patch(phi, lines(0, 30), po), above = fit_patch(phi, lines(12, 20), po);
-  REQUIRE(machinable(wide));
-  REQUIRE(machinable(above));
-  // The lowest z (mm) of the flank a patch brings within 0.02 mm, and the union's coverage.
-  const auto lowest = [&](const PatchFit& f) {
-    double z = INFINITY;
+    return fit_patch(phi, spec, po);
+  }
+  // The lowest and highest z (mm) of the flank a patch brings within 0.02 mm.
+  std::pair<double, double> reach(const PatchFit& f) const {
+    double lo = INFINITY, hi = -INFINITY;
     for (size_t v = 0; v < phi_mm.vertices.size(); ++v)
       if (std::isfinite(f.machined.design_deviation[v]) && std::abs(f.machined.design_deviation[v]) <= po.tolerance)
-        z = std::min(z, phi_mm.vertices[v].z());
-    return z;
-  };
-  const auto union_coverage = [&](const std::vector<PatchFit>& c) {
+        lo = std::min(lo, phi_mm.vertices[v].z()), hi = std::max(hi, phi_mm.vertices[v].z());
+    return {lo, hi};
+  }
+  double lowest(const PatchFit& f) const { return reach(f).first; }
+  double union_coverage(const std::vector<PatchFit>& c) const {
     std::vector<const MachinedSurface*> ms;
     for (const PatchFit& f : c) ms.push_back(&f.machined);
     return coverage(phi.mesh(), union_deviation(ms, phi_mm.vertices.size()).deviation, po.tolerance);
-  };
+  }
+  // The last pass's options: the tool's end swept, a narrow tip of Ø1.5 mm.
+  CoverOptions cover_options() const {
+    CoverOptions co;
+    co.patch = po;
+    co.end = ToolEnd{};
+    co.floor_tip = fr.length_to_unit(0.75);
+    return co;
+  }
+};
+
+TEST_CASE("detection's last pass fits a wide tip again narrow where another patch machines the flank above, and it reaches lower") {
+  // SteepFlankCover. The cover: a patch fitted from lines with a tool up to Ø10 (z 2.5 to 28 mm),
+  // and one from lines higher up the flank. Alone, a narrow tip on the floor cost the first patch as
+  // much at the top of the flank as it brought at the bottom (its cutter as long, 2 mm lower);
+  // against the patch above, the last pass (floor_tip Ø1.5) fits it again so, and the union grows by
+  // the rows it reaches lower.
+  const SteepFlankCover s;
+  const Similarity& fr = s.fr;
+  const PatchFit wide = s.fitted(0, 30), above = s.fitted(12, 20);
+  REQUIRE(machinable(wide));
+  REQUIRE(machinable(above));
   const auto tip_mm = [&](const PatchFit& f) { return 2 * fr.length_to_mm(std::min(f.fit.tool.d(0), f.fit.tool.d(1))); };
-  CoverOptions co;
-  co.patch = po;
-  co.end = ToolEnd{};
-  co.floor_tip = fr.length_to_unit(0.75);
+  CoverOptions co = s.cover_options();
   co.reach_further = false;
   const std::vector<PatchFit> before{wide, above};
   std::vector<PatchFit> cover = before;
-  const std::vector<size_t> replaced = finish_cover(phi, cover, co);
-  MESSAGE("wide: tip Ø", tip_mm(wide), " mm, lowest z ", lowest(wide), " mm; after the pass: tip Ø", tip_mm(cover[0]),
-          " mm, lowest z ", lowest(cover[0]), " mm; union ", union_coverage(before), " -> ", union_coverage(cover), "; the patch above: lowest z ", lowest(above), " -> ", lowest(cover[1]), " mm, its cutter made ",
+  const std::vector<size_t> replaced = finish_cover(s.phi, cover, co);
+  MESSAGE("wide: tip Ø", tip_mm(wide), " mm, lowest z ", s.lowest(wide), " mm; after the pass: tip Ø", tip_mm(cover[0]),
+          " mm, lowest z ", s.lowest(cover[0]), " mm; union ", s.union_coverage(before), " -> ", s.union_coverage(cover),
+          "; the patch above: lowest z ", s.lowest(above), " -> ", s.lowest(cover[1]), " mm, its cutter made ",
           fr.length_to_mm(cover[1].tip_lengthened), " mm longer at its tip");
-  CHECK(lowest(wide) >= 2.0);
+  CHECK(s.lowest(wide) >= 2.0);
   REQUIRE(!replaced.empty());
   CHECK(replaced[0] == 0);
   CHECK(tip_mm(cover[0]) <= 1.5 + 1e-6);
-  CHECK(lowest(cover[0]) <= 1.0);
-  CHECK(union_coverage(cover) > union_coverage(before) + 0.02);
+  CHECK(s.lowest(cover[0]) <= 1.0);
+  CHECK(s.union_coverage(cover) > s.union_coverage(before) + 0.02);
   CHECK(machinable(cover[0]));
   // The patch above, judged against the narrow one below it: each variant of its floor pass is
   // offered longer at its tip, not only the one that brings most (that one reached z 11.5 mm, 1 mm
   // longer): 4 mm longer, it reaches z 8.5 mm.
   REQUIRE(replaced == std::vector<size_t>{0, 1});
-  CHECK(lowest(cover[1]) <= 9.0);
+  CHECK(s.lowest(cover[1]) <= 9.0);
   CHECK(fr.length_to_mm(cover[1].tip_lengthened) >= 3.0);
   CHECK(machinable(cover[1]));
   // Without the floor pass (no end swept): nothing to offer.
   co.end.reset();
   std::vector<PatchFit> plain = before;
-  CHECK(finish_cover(phi, plain, co).empty());
+  CHECK(finish_cover(s.phi, plain, co).empty());
 }
 
 TEST_CASE("detection's last pass judges a patch again once a patch after it was replaced, and the union grows") {
-  // test::steep_flank over its floor (z 0..30 mm). The cover: a patch high up the flank (a Ø10 tip
-  // at z 16 mm, 13.5 mm long: up to z 29) judged first, and one up the whole flank (Ø10 tip: from
-  // z 2.5 mm to the top) after it. First sweep: the high patch's cutter made longer brings nothing
-  // (the long patch machines the top); the long patch fitted again narrow on the floor stands 2 mm
-  // lower and reaches z 0.5 mm, its top now short of the flank's. The second sweep judges the high
-  // patch again, against that: its cutter made longer machines the top strip.
-  const TriMesh phi_mm = test::steep_flank();
-  const Similarity fr = unit_diagonal_frame(phi_mm);
-  const SurfaceIndex phi(transformed(phi_mm, fr));
-  const SurfaceIndex floor(to_unit(test::floor_under_leaning_flank(), fr));
-  const Eigen::Vector3d up = Eigen::Vector3d(0.25, 0, 1).normalized(), n = Eigen::Vector3d(1, 0, -0.25).normalized();
-  // Lines 5 mm off the flank along its normal, `along` mm up it from z = `z0`.
-  const auto lines = [&](double z0, double along) {
-    PatchSpec spec;
-    spec.name = "p";
-    for (double y : {3.0, 30.0, 57.0}) {
-      const Eigen::Vector3d a = Eigen::Vector3d(0.25 * z0, y, z0) + 5 * n;
-      spec.lines.push_back({fr.to_unit(a), fr.to_unit(a + along * up)});
-    }
-    return spec;
-  };
-  PatchOptions po;
-  po.fit.shape = ToolShape::General;
-  po.fit.constraints.max_radius = fr.length_to_unit(5);
-  po.fit.constraints.max_length = fr.length_to_unit(31);
-  po.fit.check.part = &floor;
-  po.fit.check.tolerance = fr.length_to_unit(0.02);
-  po.fit.check.floor_reach = 1;
-  po.fit.check.floor_height = fr.length_to_unit(0.01);
-  po.tolerance = fr.length_to_unit(0.02);
-  po.orient_by_part = true;
-  const PatchFit high = fit_patch(phi, lines(16, 13.5), po), whole = fit_patch(phi, lines(0, 31), po);
+  // SteepFlankCover, cutters up to 31 mm. The cover: a patch high up the flank (a Ø10 tip at z 16
+  // mm, 13.5 mm long: up to z 29) judged first, and one up the whole flank (Ø10 tip: from z 2.5 mm to
+  // the top) after it. First sweep: the high patch's cutter made longer brings nothing (the long patch
+  // machines the top); the long patch fitted again narrow on the floor stands 2 mm lower and reaches
+  // z 0.5 mm, its top now short of the flank's. The second sweep judges the high patch again, against
+  // that: its cutter made longer machines the top strip.
+  SteepFlankCover s;
+  s.po.fit.constraints.max_length = s.fr.length_to_unit(31);
+  const Similarity& fr = s.fr;
+  const PatchFit high = s.fitted(16, 13.5), whole = s.fitted(0, 31);
   REQUIRE(machinable(high));
   REQUIRE(machinable(whole));
-  // The lowest and highest z (mm) of the flank a patch brings within 0.02 mm, and the union's coverage.
-  const auto reach = [&](const PatchFit& f) {
-    double lo = INFINITY, hi = -INFINITY;
-    for (size_t v = 0; v < phi_mm.vertices.size(); ++v)
-      if (std::isfinite(f.machined.design_deviation[v]) && std::abs(f.machined.design_deviation[v]) <= po.tolerance)
-        lo = std::min(lo, phi_mm.vertices[v].z()), hi = std::max(hi, phi_mm.vertices[v].z());
-    return std::pair{lo, hi};
-  };
-  const auto union_coverage = [&](const std::vector<PatchFit>& c) {
-    std::vector<const MachinedSurface*> ms;
-    for (const PatchFit& f : c) ms.push_back(&f.machined);
-    return coverage(phi.mesh(), union_deviation(ms, phi_mm.vertices.size()).deviation, po.tolerance);
-  };
-  CHECK(reach(high).second == doctest::Approx(29));
-  CHECK(reach(whole) == std::pair{2.5, 30.0});
-  CoverOptions co;
-  co.patch = po;
-  co.end = ToolEnd{};
-  co.floor_tip = fr.length_to_unit(0.75);
+  CHECK(s.reach(high).second == doctest::Approx(29));
+  CHECK(s.reach(whole) == std::pair{2.5, 30.0});
+  CoverOptions co = s.cover_options();
   const auto finished = [&](int sweeps, std::vector<size_t>& seen, std::vector<size_t>& replaced) {
     co.finish_sweeps = sweeps;
     std::vector<PatchFit> cover{high, whole};
-    replaced = finish_cover(phi, cover, co, [&](size_t k, double) { seen.push_back(k); });
-    MESSAGE(sweeps, " sweeps: union ", union_coverage({high, whole}), " -> ", union_coverage(cover), "; high z ", reach(cover[0]).first,
-            "..", reach(cover[0]).second, " mm, made ", fr.length_to_mm(cover[0].reach_lengthened), " mm longer; whole z ",
-            reach(cover[1]).first, "..", reach(cover[1]).second, " mm");
+    replaced = finish_cover(s.phi, cover, co, [&](size_t k, double) { seen.push_back(k); });
+    MESSAGE(sweeps, " sweeps: union ", s.union_coverage({high, whole}), " -> ", s.union_coverage(cover), "; high z ",
+            s.reach(cover[0]).first, "..", s.reach(cover[0]).second, " mm, made ", fr.length_to_mm(cover[0].reach_lengthened),
+            " mm longer; whole z ", s.reach(cover[1]).first, "..", s.reach(cover[1]).second, " mm");
     return cover;
   };
   std::vector<size_t> seen1, replaced1, seen3, replaced3;
@@ -818,17 +797,17 @@ TEST_CASE("detection's last pass judges a patch again once a patch after it was 
   // One sweep: the long patch replaced, narrow on the floor; its top and the high patch's stop short.
   CHECK(seen1 == std::vector<size_t>{0, 1});
   CHECK(replaced1 == std::vector<size_t>{1});
-  CHECK(reach(one[1]).first <= 1.0);
-  CHECK(reach(one[1]).second < 29);
-  CHECK(reach(one[0]).second == doctest::Approx(29));
+  CHECK(s.reach(one[1]).first <= 1.0);
+  CHECK(s.reach(one[1]).second < 29);
+  CHECK(s.reach(one[0]).second == doctest::Approx(29));
   // Three: the high patch judged again and made longer (the second sweep), then the long one judged
   // again against it; nothing was replaced since, so no third sweep.
   CHECK(seen3 == std::vector<size_t>{0, 1, 0, 1});
   CHECK(replaced3 == std::vector<size_t>{1, 0});
-  CHECK(reach(three[0]).second == doctest::Approx(30));
+  CHECK(s.reach(three[0]).second == doctest::Approx(30));
   CHECK(three[0].reach_lengthened > 0);
   CHECK(machinable(three[0]));
-  CHECK(union_coverage(three) > union_coverage(one) + 0.015);
+  CHECK(s.union_coverage(three) > s.union_coverage(one) + 0.015);
 }
 
 TEST_CASE("a tip lengthened towards a floor and ground back where it meets it reports the net change against the fitted tool") {
