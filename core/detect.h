@@ -168,6 +168,8 @@ struct Detection {
 //    length and to the tool's max_length), judged as a candidate.
 // The variant under which the union's coverage of Φ grows most replaces the patch in `cover`. A
 // patch is judged again once another has been replaced since (CoverOptions::finish_sweeps).
+// `on_patch(k, coverage)` before patch k is judged, with the union's coverage so far. Returns the
+// indices of the patches replaced, in the order replaced (a patch replaced in two sweeps twice).
 std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
                                  const std::function<void(size_t, double)>& on_patch = {});
 
