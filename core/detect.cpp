@@ -897,26 +897,26 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
   return f;
 }
 
-// The floor pass (CoverOptions::end): the round's best judged again with the tool's end swept, and
-// fitted again from its motion with the tip pulled onto the part's floor (its tool free), judged so
-// too; with CoverOptions::floor_tip also with a narrow tip, pulled so; the one that brings most
-// uncovered area is kept. A held tool (catalogue or shared) is left as it is. The winner's cutter is
-// then offered longer at its tip; `lengthen_each` (the last pass, finish_cover): every variant's.
-Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<char>& covered, const std::vector<double>& area,
-                      const CoverOptions& o, bool lengthen_each = false) {
+// The floor pass (CoverOptions::end) on a patch: the options its variants are judged with (the
+// tool's end swept; with_check has turned the fit so that its tip is the a end: kept so, the tip's
+// limits held there).
+PatchOptions floor_options(const CoverOptions& o, const Rails& r) {
   PatchOptions po = candidate_options(o);
   po.machined.end = o.end;
-  // with_check has turned the fit so that its tip is the a end: kept so, the tip's limits held there.
-  tip_held_at_a(po, f.fit.fit.rails);
-  Fitted best;
-  std::vector<PatchFit> variants;  // each judged machinable, before the tips are lengthened
-  bool lengthening = false;
+  tip_held_at_a(po, r);
+  return po;
+}
+
+// The floor pass's variants of a patch, each judged and machinable, in the order offered: the patch
+// as it is, fitted again from its motion with the tip pulled onto the part's floor (its tool free),
+// and with CoverOptions::floor_tip with a narrow tip, pulled so. They depend on the patch alone, not
+// on what the others cover. A held tool (catalogue or shared) is never passed here.
+std::vector<PatchFit> floor_variants(const SurfaceIndex& surface, const PatchFit& f, const CoverOptions& o) {
+  const PatchOptions po = floor_options(o, f.fit.rails);
+  std::vector<PatchFit> variants;
   const auto offer = [&](PatchFit p) {
     std::optional<PatchFit> j = judged(surface, std::move(p), po);
-    if (!j || !machinable(*j)) return;
-    const double g = gain_of(*j, covered, area, po.tolerance);
-    if (lengthen_each && !lengthening) variants.push_back(*j);
-    if (!best.ok || g > best.gain) best.fit = std::move(*j), best.gain = g, best.ok = true;
+    if (j && machinable(*j)) variants.push_back(std::move(*j));
   };
   // `p` fitted again from `start` with `fit` (its iterations counted on f's) and offered; a motion
   // that leaves Φ is no variant.
@@ -926,44 +926,79 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
     } catch (const InputError&) {
       return;
     }
-    p.fit.eps_ini = f.fit.fit.eps_ini;
-    p.fit.iterations += f.fit.fit.iterations;
+    p.fit.eps_ini = f.fit.eps_ini;
+    p.fit.iterations += f.fit.iterations;
     offer(std::move(p));
   };
-  offer(f.fit);
+  offer(f);
   PatchOptions pull = po;
   pull.fit.check.floor_reach = o.patch.fit.check.floor_reach;
-  refit(f.fit, f.fit.fit.rails, pull.fit);
+  refit(f, f.fit.rails, pull.fit);
   const double narrow = o.floor_tip;
   if (narrow > 0 && narrow < pull.fit.constraints.max_tip_radius && narrow >= pull.fit.constraints.min_tip_radius) {
-    PatchFit thin = f.fit;
+    PatchFit thin = f;
     thin.clear_part_adjustments();  // a tool of its own, fitted on the axis as it stands
-    const Rails start = tip_tilted(surface, f.fit.fit.rails, 0.9 * narrow);
+    const Rails start = tip_tilted(surface, f.fit.rails, 0.9 * narrow);
     thin.initial = start;
     FitOptions held = pull.fit;
     held.constraints.max_tip_radius = narrow;
     // The floor's pull reaches as far as it did for the wide tip: the narrow tip starts where the wide
     // one stood, its lowest point (the wide rim's dip) up to that tip's radius above the floor, beyond
     // the narrow tip's own reach, and floated there.
-    held.check.floor_reach *= std::max(1.0, f.fit.fit.tool.d(0) / narrow);
+    held.check.floor_reach *= std::max(1.0, f.fit.tool.d(0) / narrow);
     // Judged with the tool's own limits (po): where the part has the tip ground shorter it widens.
     refit(std::move(thin), start, held);
   }
-  // The winner's cutter made longer at its tip (lengthened_at_tip) by 5%, 10% and 20% of its length:
-  // a tip that stops short of the floor (rotor 37's hub rows, 1-3 mm of flank left under tips that
-  // kept clear) reaches down to it, and with_check grinds back what would meet the part.
-  lengthening = true;
-  if (best.ok) {
-    if (!lengthen_each) variants = {best.fit};
-    for (const PatchFit& v : variants)
-      for (const double g : {0.05, 0.1, 0.2})
-        if (std::optional<PatchFit> l = lengthened_at_tip(v, po, g * v.fit.rails.length)) offer(std::move(*l));
-  }
-  if (!best.ok) return f;
+  return variants;
+}
+
+// A variant's cutter made longer at its tip (lengthened_at_tip) by 5%, 10% and 20% of its length, each
+// judged (with `po`, the floor options of the patch it is a variant of) and machinable: a tip that
+// stops short of the floor (rotor 37's hub rows, 1-3 mm of flank left under tips that kept clear)
+// reaches down to it, and with_check grinds back what would meet the part.
+std::vector<PatchFit> tip_lengthenings(const SurfaceIndex& surface, const PatchFit& v, const PatchOptions& po) {
+  std::vector<PatchFit> out;
+  for (const double g : {0.05, 0.1, 0.2})
+    if (std::optional<PatchFit> l = lengthened_at_tip(v, po, g * v.fit.rails.length))
+      if (std::optional<PatchFit> j = judged(surface, std::move(*l), po); j && machinable(*j)) out.push_back(std::move(*j));
+  return out;
+}
+
+// The first of `variants` that brings most uncovered area, as a replacement of `f` (unset: none).
+std::optional<size_t> most_gaining(const std::vector<PatchFit>& variants, const std::vector<char>& covered,
+                                   const std::vector<double>& area, double tol) {
+  std::optional<size_t> best;
+  double most = 0;
+  for (size_t i = 0; i < variants.size(); ++i)
+    if (const double g = gain_of(variants[i], covered, area, tol); !best || g > most) best = i, most = g;
+  return best;
+}
+
+// `f` replaced by `variant`, the floor pass's choice, bringing `gain`.
+Fitted floor_chosen(const Fitted& f, PatchFit variant, double gain) {
+  Fitted best;
+  best.fit = std::move(variant);
+  best.gain = gain;
+  best.ok = true;
   best.cut = f.cut;
-  best.whole_gain = f.cut ? f.whole_gain : best.gain;
+  best.whole_gain = f.cut ? f.whole_gain : gain;
   best.from_region = f.from_region;
   return best;
+}
+
+// The floor pass on a round's best: of its floor_variants the one that brings most uncovered area,
+// then offered longer at its tip (tip_lengthenings); `f` itself when no variant is machinable.
+Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<char>& covered, const std::vector<double>& area,
+                      const CoverOptions& o) {
+  const double tol = o.patch.tolerance;
+  std::vector<PatchFit> variants = floor_variants(surface, f.fit, o);
+  const std::optional<size_t> first = most_gaining(variants, covered, area, tol);
+  if (!first) return f;
+  std::vector<PatchFit> longer = tip_lengthenings(surface, variants[*first], floor_options(o, f.fit.fit.rails));
+  variants.insert(variants.end(), std::make_move_iterator(longer.begin()), std::make_move_iterator(longer.end()));
+  const size_t i = *most_gaining(variants, covered, area, tol);
+  const double g = gain_of(variants[i], covered, area, tol);
+  return floor_chosen(f, std::move(variants[i]), g);
 }
 
 // A patch of the cover with its cutter made longer at its holder end (lengthened_to_reach) by 10%, 25%
@@ -1036,14 +1071,15 @@ std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchF
   // A patch is judged again once another has been replaced since it was last judged (patches replaced
   // after it change what it is judged against): sweeps over the cover until none is (finish_sweeps).
   const size_t n = cover.size();
-  std::vector<long> judged_at(n, -1), replaced_at(n, -1);
-  long changes = 0;
+  std::vector<char> stale(n, 1);  // not judged since the last patch replaced
+  // Each patch's floor variants, every one also longer at its tip: they depend on the patch alone, so
+  // they are kept until it is replaced, and a sweep judging it again only chooses among them anew.
+  std::vector<std::optional<std::vector<PatchFit>>> variants(n);
   for (int sweep = 0; sweep < o.finish_sweeps; ++sweep) {
     bool any = false;
     for (size_t k = 0; k < n; ++k) {
-      bool stale = judged_at[k] < 0;
-      for (size_t j = 0; j < n && !stale; ++j) stale = j != k && replaced_at[j] > judged_at[k];
-      if (!stale) continue;
+      if (!stale[k]) continue;
+      stale[k] = 0;
       any = true;
       if (on_patch) on_patch(k, now);
       std::vector<char> others(nv, 0);
@@ -1057,19 +1093,29 @@ std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchF
       const auto consider = [&](Fitted g) {
         if (const double c = union_coverage(k, &g.fit); c > best_coverage) best_coverage = c, best = std::move(g);
       };
-      if (floor) consider(floor_finished(surface, f, others, area, o, true));
+      if (floor) {
+        if (!variants[k]) {
+          variants[k] = floor_variants(surface, f.fit, o);
+          const PatchOptions po = floor_options(o, f.fit.fit.rails);
+          for (size_t i = 0, as_fitted = variants[k]->size(); i < as_fitted; ++i) {
+            std::vector<PatchFit> longer = tip_lengthenings(surface, (*variants[k])[i], po);
+            variants[k]->insert(variants[k]->end(), std::make_move_iterator(longer.begin()), std::make_move_iterator(longer.end()));
+          }
+        }
+        if (const std::optional<size_t> i = most_gaining(*variants[k], others, area, tol))
+          consider(floor_chosen(f, (*variants[k])[*i], gain_of((*variants[k])[*i], others, area, tol)));
+      }
       if (further) {
         const Fitted& base = best ? *best : f;
         Fitted longer = reaching_further(surface, base, others, area, o, floor);
         if (longer.fit.reach_lengthened > base.fit.reach_lengthened) consider(std::move(longer));
       }
-      judged_at[k] = changes;
       if (best) {
         cover[k] = std::move(best->fit);
         now = best_coverage;
         replaced.push_back(k);
-        replaced_at[k] = ++changes;
-        judged_at[k] = changes;
+        for (size_t j = 0; j < n; ++j) stale[j] = j != k;
+        variants[k].reset();
       }
     }
     if (!any) break;

@@ -167,7 +167,9 @@ struct Detection {
 //    where that end's column of Ω still lies over Φ (lengthened_to_reach: by 10%, 25%, 50% of its
 //    length and to the tool's max_length), judged as a candidate.
 // The variant under which the union's coverage of Φ grows most replaces the patch in `cover`. A
-// patch is judged again once another has been replaced since (CoverOptions::finish_sweeps).
+// patch is judged again once another has been replaced since (CoverOptions::finish_sweeps); its floor
+// variants, which depend on the patch alone, are kept until it is replaced, so judging it again only
+// chooses among them anew (and makes the holder-end variants again).
 // `on_patch(k, coverage)` before patch k is judged, with the union's coverage so far. Returns the
 // indices of the patches replaced, in the order replaced (a patch replaced in two sweeps twice).
 std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchFit>& cover, const CoverOptions& o,
