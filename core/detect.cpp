@@ -964,7 +964,7 @@ std::vector<PatchFit> tip_lengthenings(const SurfaceIndex& surface, const PatchF
   return out;
 }
 
-// The first of `variants` that brings most uncovered area, as a replacement of `f` (unset: none).
+// The index of the first of `variants` that brings most uncovered area (unset: `variants` is empty).
 std::optional<size_t> most_gaining(const std::vector<PatchFit>& variants, const std::vector<char>& covered,
                                    const std::vector<double>& area, double tol) {
   std::optional<size_t> best;
