@@ -964,13 +964,28 @@ std::vector<PatchFit> tip_lengthenings(const SurfaceIndex& surface, const PatchF
   return out;
 }
 
-// The index of the first of `variants` that brings most uncovered area (unset: `variants` is empty).
-std::optional<size_t> most_gaining(const std::vector<PatchFit>& variants, const std::vector<char>& covered,
-                                   const std::vector<double>& area, double tol) {
-  std::optional<size_t> best;
-  double most = 0;
+// floor_variants, each also offered longer at its tip (tip_lengthenings), not only the one that brings
+// most: the last pass's, which depend on the patch alone.
+std::vector<PatchFit> floor_variants_lengthened(const SurfaceIndex& surface, const PatchFit& f, const CoverOptions& o) {
+  std::vector<PatchFit> variants = floor_variants(surface, f, o);
+  const PatchOptions po = floor_options(o, f.fit.rails);
+  for (size_t i = 0, as_fitted = variants.size(); i < as_fitted; ++i) {
+    std::vector<PatchFit> longer = tip_lengthenings(surface, variants[i], po);
+    variants.insert(variants.end(), std::make_move_iterator(longer.begin()), std::make_move_iterator(longer.end()));
+  }
+  return variants;
+}
+
+// The first of some variants that brings most uncovered area: its index and that area.
+struct MostGaining {
+  size_t index = 0;
+  double gain = 0;
+};
+std::optional<MostGaining> most_gaining(const std::vector<PatchFit>& variants, const std::vector<char>& covered,
+                                        const std::vector<double>& area, double tol) {
+  std::optional<MostGaining> best;
   for (size_t i = 0; i < variants.size(); ++i)
-    if (const double g = gain_of(variants[i], covered, area, tol); !best || g > most) best = i, most = g;
+    if (const double g = gain_of(variants[i], covered, area, tol); !best || g > best->gain) best = MostGaining{i, g};
   return best;
 }
 
@@ -992,13 +1007,12 @@ Fitted floor_finished(const SurfaceIndex& surface, Fitted f, const std::vector<c
                       const CoverOptions& o) {
   const double tol = o.patch.tolerance;
   std::vector<PatchFit> variants = floor_variants(surface, f.fit, o);
-  const std::optional<size_t> first = most_gaining(variants, covered, area, tol);
+  const std::optional<MostGaining> first = most_gaining(variants, covered, area, tol);
   if (!first) return f;
-  std::vector<PatchFit> longer = tip_lengthenings(surface, variants[*first], floor_options(o, f.fit.fit.rails));
+  std::vector<PatchFit> longer = tip_lengthenings(surface, variants[first->index], floor_options(o, f.fit.fit.rails));
   variants.insert(variants.end(), std::make_move_iterator(longer.begin()), std::make_move_iterator(longer.end()));
-  const size_t i = *most_gaining(variants, covered, area, tol);
-  const double g = gain_of(variants[i], covered, area, tol);
-  return floor_chosen(f, std::move(variants[i]), g);
+  const MostGaining best = *most_gaining(variants, covered, area, tol);
+  return floor_chosen(f, std::move(variants[best.index]), best.gain);
 }
 
 // A patch of the cover with its cutter made longer at its holder end (lengthened_to_reach) by 10%, 25%
@@ -1072,8 +1086,8 @@ std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchF
   // after it change what it is judged against): sweeps over the cover until none is (finish_sweeps).
   const size_t n = cover.size();
   std::vector<char> stale(n, 1);  // not judged since the last patch replaced
-  // Each patch's floor variants, every one also longer at its tip: they depend on the patch alone, so
-  // they are kept until it is replaced, and a sweep judging it again only chooses among them anew.
+  // Each patch's floor_variants_lengthened: they depend on the patch alone, so they are kept until it
+  // is replaced, and a sweep judging it again only chooses among them anew.
   std::vector<std::optional<std::vector<PatchFit>>> variants(n);
   for (int sweep = 0; sweep < o.finish_sweeps; ++sweep) {
     bool any = false;
@@ -1094,16 +1108,9 @@ std::vector<size_t> finish_cover(const SurfaceIndex& surface, std::vector<PatchF
         if (const double c = union_coverage(k, &g.fit); c > best_coverage) best_coverage = c, best = std::move(g);
       };
       if (floor) {
-        if (!variants[k]) {
-          variants[k] = floor_variants(surface, f.fit, o);
-          const PatchOptions po = floor_options(o, f.fit.fit.rails);
-          for (size_t i = 0, as_fitted = variants[k]->size(); i < as_fitted; ++i) {
-            std::vector<PatchFit> longer = tip_lengthenings(surface, (*variants[k])[i], po);
-            variants[k]->insert(variants[k]->end(), std::make_move_iterator(longer.begin()), std::make_move_iterator(longer.end()));
-          }
-        }
-        if (const std::optional<size_t> i = most_gaining(*variants[k], others, area, tol))
-          consider(floor_chosen(f, (*variants[k])[*i], gain_of((*variants[k])[*i], others, area, tol)));
+        if (!variants[k]) variants[k] = floor_variants_lengthened(surface, f.fit, o);
+        if (const std::optional<MostGaining> c = most_gaining(*variants[k], others, area, tol))
+          consider(floor_chosen(f, (*variants[k])[c->index], c->gain));
       }
       if (further) {
         const Fitted& base = best ? *best : f;
