@@ -162,7 +162,7 @@ struct PartCheck {
 PartCheck part_check(const SurfaceIndex& surface, const PatchFit& f, const PatchOptions& o, double threshold) {
   const int rows = f.machined.omega.n_t;
   const CheckSurface& c = o.fit.check;
-  return {check_profile(f.fit.rails, f.fit.tool, c, rows, o.fit.samples_s, true),
+  return {check_profile(f.fit.rails, f.fit.tool, c, rows, o.fit.samples_s, true, &surface, c.twin_sag + o.tolerance),
           cutter_hits(*c.part, f.fit.rails, f.fit.tool, rows, o.fit.samples_t, threshold, c.tolerance, hit_step(o), &surface,
                       c.twin_sag + o.tolerance)};
 }

@@ -972,3 +972,53 @@ TEST_CASE("a fin reaching 0.5 mm into the cutter's side just above its tip, betw
   CHECK(((y_end < 37.85 && y_end > 36.5) || tip_z > 1.3));
   CHECK(f.coverage > 0.5 * g.coverage);
 }
+
+TEST_CASE("a part face meeting the design surface at the cutter's tip is Φ's to judge within the tolerance of Φ, as in the collision check") {
+  // The upright cylinder (radius 5, axis x = 5, tip plane z = 5) runs along Φ (x = 0) over y 10-50.
+  // For y >= 30 a coarse part face leaves Φ just above the tip plane and falls away from it (a hub
+  // fillet's chord at a blade's foot): from (0, y, 5 + rise) to (3, y, 4). The tip's rim dips into it
+  // only next to Φ. Rising 0.01 mm, every point it enters beyond the check tolerance (0.005 mm) lies
+  // within Φ's tolerance (0.02 mm) of Φ: Φ's to judge, as check_collisions and the back-simulation
+  // judge it (left_to_design), and the whole motion is kept. Rising 0.2 mm (a ledge proud of the tip
+  // plane), it still trims the motion where the ledge starts.
+  Setup s;
+  const Rails rails = upright_rails(s.fr, 5);
+  const ToolRadius cylinder = cylinder_of(s.fr, 5);
+  const auto fit_of = [&](const SurfaceIndex& part) {
+    PatchOptions po = s.checked_options(part);
+    po.tolerance = s.fr.length_to_unit(0.02);
+    po.trim_gouges = true;
+    po.fit.check.up = Eigen::Vector3d::UnitZ();
+    PatchFit f;
+    f.fit.rails = rails;
+    f.fit.tool = cylinder;
+    return std::make_pair(machine_and_trim(s.phi, f, po), po);
+  };
+  const auto chord = [&](double rise) {
+    return to_unit(test::grid_mesh(2, 16, [&](int i, int j) { return Eigen::Vector3d(3.0 * i, 30 + 2.0 * j, i ? 4.0 : 5 + rise); }),
+                   s.fr);
+  };
+  const SurfaceIndex fillet(chord(0.01)), ledge(chord(0.2));
+  // The trim's own judgement: the fillet's chord enters the tip's rim by 0.0095 mm, Φ's within 0.02 mm of it.
+  const auto [kept, po] = fit_of(fillet);
+  const CheckProfile all = check_profile(rails, cylinder, po.fit.check, 50, po.fit.samples_s, true);
+  const CheckProfile left = check_profile(rails, cylinder, po.fit.check, 50, po.fit.samples_s, true, &s.phi, po.tolerance);
+  const double entered = s.fr.length_to_mm(*std::max_element(all.intrusion.begin(), all.intrusion.end()));
+  MESSAGE("the fillet's chord: ", entered, " mm beyond the check tolerance counted alone; kept t ", kept.t_from, "-", kept.t_to);
+  CHECK(entered > 0.002);
+  CHECK(entered < 0.006);
+  CHECK(*std::max_element(left.intrusion.begin(), left.intrusion.end()) <= 0);
+  CHECK(kept.t_from == 0.0);
+  CHECK(kept.t_to == 1.0);
+  CHECK_FALSE(kept.check_trim.has_value());
+  CHECK(machinable(kept));
+  // The ledge: trimmed before y = 30 (t of y = 30 on the rails through y 10, 25, 40, 50 lies near 0.5).
+  const PatchFit trimmed = fit_of(ledge).first;
+  const double y_end = s.fr.to_mm(trimmed.fit.rails.a.point(1)).y();
+  MESSAGE("the ledge: kept t ", trimmed.t_from, "-", trimmed.t_to, ", the motion ends at y = ", y_end, " mm");
+  REQUIRE(trimmed.check_trim.has_value());
+  CHECK_FALSE(trimmed.check_trim->body);
+  CHECK(y_end < 30.5);
+  CHECK(y_end > 27);
+  CHECK(machinable(trimmed));
+}
