@@ -187,9 +187,9 @@ struct CheckProfile {
 };
 // `enclose`: as the collision check judges (core/collision.h), for deciding what to trim: the cutter
 // sampled densely enough for the tolerance and every sample grown to enclose its slab of the solid;
-// otherwise the fit's own samples (samples_s along the cutter). `design` (with `enclose`, as the
-// collision check): a cutter sample's intrusion at a part point within `design_within` of the design
-// surface is Φ's to judge (left_to_design) and not counted.
+// otherwise the fit's own samples (samples_s along the cutter). `design`: a cutter sample's intrusion
+// at a part point within `design_within` of the design surface is Φ's to judge (left_to_design, as
+// the collision check leaves it) and not counted.
 [[nodiscard]] CheckProfile check_profile(const Rails& rails, const ToolRadius& tool, const CheckSurface& check,
                                          int rows, int samples_s, bool enclose = false,
                                          const SurfaceIndex* design = nullptr, double design_within = 0);

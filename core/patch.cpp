@@ -149,6 +149,10 @@ CutterHits cutter_hits(const SurfaceIndex& target, const Rails& rails, const Too
 // the fit trimmed at exactly 0.02 mm, the collision check then found 0.0200x mm and refused it).
 constexpr double kTrimMargin = 0.1;
 
+// The design surface's share of the part as the trims and the collision check see it: a cutter hit
+// within the twin's sag plus Φ's tolerance of Φ (left_to_design), both unit frame.
+double design_within(const PatchOptions& o) { return o.fit.check.twin_sag + o.tolerance; }
+
 // The step the motion between Ω's rows is checked at (cutter_hits): the clearance, else ten times the
 // tolerance (both unit frame).
 double hit_step(const PatchOptions& o) { return o.fit.check.clearance > 0 ? o.fit.check.clearance : 10 * o.tolerance; }
@@ -162,9 +166,9 @@ struct PartCheck {
 PartCheck part_check(const SurfaceIndex& surface, const PatchFit& f, const PatchOptions& o, double threshold) {
   const int rows = f.machined.omega.n_t;
   const CheckSurface& c = o.fit.check;
-  return {check_profile(f.fit.rails, f.fit.tool, c, rows, o.fit.samples_s, true, &surface, c.twin_sag + o.tolerance),
+  return {check_profile(f.fit.rails, f.fit.tool, c, rows, o.fit.samples_s, true, &surface, design_within(o)),
           cutter_hits(*c.part, f.fit.rails, f.fit.tool, rows, o.fit.samples_t, threshold, c.tolerance, hit_step(o), &surface,
-                      c.twin_sag + o.tolerance)};
+                      design_within(o))};
 }
 // Its intrusion per row with the cutter's hits counted beyond `threshold` (those deeper than it): the
 // worst of the two, and where.
@@ -215,10 +219,10 @@ namespace {
 bool tip_is_a(const Rails& r, const CheckSurface& c) { return !c.up || mean_axis(r).dot(*c.up) >= 0; }
 
 // The longest stretch of t (over 2 m rows) along which the tool keeps out of the part by the check
-// profile.
-std::pair<double, double> clear_run(const Rails& r, const ToolRadius& tool, const PatchOptions& o) {
+// profile (hits next to Φ left to Φ, as the trim leaves them).
+std::pair<double, double> clear_run(const SurfaceIndex& surface, const Rails& r, const ToolRadius& tool, const PatchOptions& o) {
   const int rows = 2 * o.fit.samples_t;
-  const CheckProfile p = check_profile(r, tool, o.fit.check, rows, o.fit.samples_s);
+  const CheckProfile p = check_profile(r, tool, o.fit.check, rows, o.fit.samples_s, false, &surface, design_within(o));
   std::vector<char> ok(static_cast<size_t>(rows));
   for (int i = 0; i < rows; ++i) ok[size_t(i)] = !(p.intrusion[size_t(i)] > 0);
   return longest_run(ok);
@@ -267,7 +271,7 @@ std::vector<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& pl
     const double c = step * k;
     ToolCut cut = cut_by(c);
     if (!admissible_cut(cut, o)) continue;
-    const auto [t0, t1] = clear_run(cut.rails, cut.tool, o);
+    const auto [t0, t1] = clear_run(surface, cut.rails, cut.tool, o);
     const double score = (t1 - t0) * (1 - c);
     if (score > best_score) best_score = score, best_c = c, best_run = t1 - t0, best = std::move(cut);
     if (t0 == 0.0 && t1 == 1.0) break;  // clear everywhere: a longer cut only loses
@@ -282,7 +286,7 @@ std::vector<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& pl
     ToolCut cut = cut_by(c);
     bool keeps = admissible_cut(cut, o);
     if (keeps) {
-      const auto [t0, t1] = clear_run(cut.rails, cut.tool, strict);
+      const auto [t0, t1] = clear_run(surface, cut.rails, cut.tool, strict);
       keeps = t1 - t0 >= best_run - 1e-12;
     }
     if (keeps) hi = c, least = std::move(cut);
@@ -316,17 +320,17 @@ std::vector<PatchFit> cut_at_tip(const SurfaceIndex& surface, const PatchFit& pl
 // clearances are tried, within max_length; the shortest whose clear stretch is longest is kept
 // (untrimmed: machine_and_trim judges the longer cutter against Φ and the part). None when the tool
 // is a fixed one or no length helps.
-std::optional<PatchFit> lengthened_at_holder(const PatchFit& base, const PatchOptions& o) {
+std::optional<PatchFit> lengthened_at_holder(const SurfaceIndex& surface, const PatchFit& base, const PatchOptions& o) {
   if (o.fit.fixed_tool || !(o.fit.check.clearance > 0)) return std::nullopt;
   const Rails& r = base.fit.rails;
   const bool tip_at_a = tip_is_a(r, o.fit.check);
-  const auto [b0, b1] = clear_run(r, base.fit.tool, o);
+  const auto [b0, b1] = clear_run(surface, r, base.fit.tool, o);
   double best_run = b1 - b0;
   std::optional<ToolCut> best;
   for (const double k : {1.0, 2.0, 4.0, 8.0}) {
     std::optional<ToolCut> longer = longer_cut(base, o, k * o.fit.check.clearance / r.length, tip_at_a);
     if (!longer) continue;
-    const auto [t0, t1] = clear_run(longer->rails, longer->tool, o);
+    const auto [t0, t1] = clear_run(surface, longer->rails, longer->tool, o);
     if (t1 - t0 > best_run + 1e-9) best_run = t1 - t0, best = std::move(longer);
     if (t0 == 0.0 && t1 == 1.0) break;  // clear everywhere: longer only risks more
   }
@@ -386,7 +390,7 @@ PatchFit with_check(const SurfaceIndex& surface, PatchFit plain, const PatchOpti
   }
   // Still trimmed for the shank or holder: the cutter made longer at its holder end.
   if (best.check_trim && best.check_trim->body)
-    if (std::optional<PatchFit> longer = lengthened_at_holder(base, o)) {
+    if (std::optional<PatchFit> longer = lengthened_at_holder(surface, base, o)) {
       if (o.on_stage) o.on_stage("cutter made longer at its holder end to keep the shank clear");
       PatchFit m = machine_and_trim(surface, std::move(*longer), o);
       if (machinable(m) && (!machinable(best) || m.coverage > best.coverage)) best = std::move(m);
