@@ -137,7 +137,9 @@ struct Sample {
   double z, reach;  // axial position; a part point farther than `reach` from the axis point cannot matter
   bool cutter;
   double radius;    // cutter: sphere radius there
-  double lo = 0, hi = 0;  // shank and holder: the slab (z from the tip) whose own nearest part point is judged too
+  // The slab (z from the tip) whose own nearest part point is judged too: always for shank and
+  // holder; for the cutter when the nearest part point lies beyond its ends.
+  double lo = 0, hi = 0;
 };
 
 struct Hit {
@@ -147,6 +149,19 @@ struct Hit {
 };
 
 }  // namespace
+
+std::vector<Footpoint> under_rim_points(const SurfaceIndex& part, const ToolPose& pose, double from,
+                                        const Eigen::Vector3d& nearest, double tip_radius, double step, double height) {
+  std::vector<Footpoint> out;
+  if (!(step > 0) || !(height > 0)) return out;
+  const Eigen::Vector3d axis = pose.axis.normalized(), c = pose.tip + from * axis;
+  const double base = pose.tip.dot(axis);
+  for (double lo = 0, hi = std::min(step, height); lo < height; lo = hi, hi = std::min(2 * hi, height))
+    out.push_back(part.closest_in_slab(c, axis, base + lo, base + hi));
+  const Eigen::Vector3d d = nearest - pose.tip, radial = d - d.dot(axis) * axis;
+  if (radial.norm() > 1e-9 * (1 + tip_radius)) out.push_back(part.closest(pose.tip + tip_radius * radial.normalized()));
+  return out;
+}
 
 CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<ToolPose>& poses, const ToolAssembly& tool,
                                  const CollisionOptions& o) {
@@ -180,7 +195,7 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
     for (double zz : {std::max(0.0, z - half), std::min(L, z + half)}) r_slab = std::max(r_slab, cutter_radius(tool, zz));
     for (const auto& c : tool.cutter)
       if (std::abs(c.x() - z) <= half) r_slab = std::max(r_slab, c.y());
-    samples.push_back({z, std::max(r, std::hypot(half, r_slab)) + o.gouge_tolerance_mm, true, r});
+    samples.push_back({z, std::max(r, std::hypot(half, r_slab)) + o.gouge_tolerance_mm, true, r, std::max(0.0, z - half), std::min(L, z + half)});
   }
   // Shank and holder: between the body's breaks (the cutter's end, the holder's face, the end of
   // its cone, its far end) samples every h or less, both ends included, a cone's so close that its
@@ -290,12 +305,31 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
         // The cutter is the solid of revolution of its radii between its flat end faces: a
         // part point below the tip plane (a floor the tip stands on) is outside it, and a point inside
         // is as deep as its way out through the side or the bottom face.
-        const Eigen::Vector3d d = f.point - pos[size_t(here)].tip;
-        const double zq = d.dot(pos[size_t(here)].axis), rho = (d - zq * pos[size_t(here)].axis).norm();
-        if (zq < -1e-9 * (1 + L) || zq > L) continue;  // beyond the cutter's end: the shank's samples see it
-        h.depth = std::min(cutter_radius(tool, std::clamp(zq, 0.0, L)) - rho, std::max(zq, 0.0));
-        if (h.depth <= o.gouge_tolerance_mm) continue;
-        if (o.design && left_to_design(*o.design, f.point, o.design_within_mm)) continue;
+        const ToolPose& at = pos[size_t(here)];
+        const auto depth_at = [&](const Eigen::Vector3d& point) -> double {
+          const Eigen::Vector3d d = point - at.tip;
+          const double zq = d.dot(at.axis), rho = (d - zq * at.axis).norm();
+          if (zq < -1e-9 * (1 + L) || zq > L) return -INFINITY;  // beyond the cutter's end: the shank's samples see it
+          return std::min(cutter_radius(tool, std::clamp(zq, 0.0, L)) - rho, std::max(zq, 0.0));
+        };
+        h.depth = depth_at(f.point);
+        if (!std::isfinite(h.depth)) {
+          // The nearest part point lies beyond the cutter's end, in the bulge of the sample's ball: it
+          // can hide a part entering the cutter beside it. Judged instead: the nearest part point
+          // within the sample's own slab, and at the tip over a floor the points under the rim.
+          const double base = at.tip.dot(at.axis);
+          std::vector<Footpoint> candidates{part.closest_in_slab(c, at.axis, base + s.lo, base + s.hi)};
+          if (s.lo == 0 && (f.point - at.tip).dot(at.axis) < 0)
+            for (const Footpoint& q : under_rim_points(part, at, s.z, f.point, cutter_radius(tool, 0), o.gouge_tolerance_mm, s.hi))
+              candidates.push_back(q);
+          queries[size_t(k)] += long(candidates.size());
+          for (const Footpoint& q : candidates)
+            if (q.face >= 0)
+              if (const double dq = depth_at(q.point); dq > h.depth) h.depth = dq, h.at = q.point;
+          if (!std::isfinite(h.depth)) continue;
+        }
+        if (!(h.depth > o.gouge_tolerance_mm)) continue;
+        if (o.design && left_to_design(*o.design, h.at, o.design_within_mm)) continue;
       } else {
         // Exact gap between the part point and the solid of revolution (2D, in the axis' half plane),
         // at the whole part's nearest point and at the slab's own.

@@ -87,6 +87,19 @@ struct CollisionReport {
   return design.closest(part_point).distance <= within_mm;
 }
 
+// Part points that may stand inside a tool's flat tip end under its rim when the part point nearest
+// to an axis point near the tip (`nearest`) lies below the tip plane: a floor under the tip hides a
+// ledge, or a hub rising towards the blade, that enters the end face beside it. For the axis point
+// `from` (z from the tip in [0, height]): the nearest part points within the slabs [0, step], [step,
+// 2 step], [2 step, 4 step], ... up to `height` over the tip plane (within a slab the one nearest the
+// axis point stands at its floor, so the thin slabs next to the tip plane find an intrusion step
+// deep or deeper to within half its depth), and the one nearest to the rim point (`tip_radius` off the
+// axis) on the side of `nearest`, where a tilted end meets a floor first. Callers judge them with
+// their own solid (check_collisions, the back-simulation's sweep).
+[[nodiscard]] std::vector<Footpoint> under_rim_points(const SurfaceIndex& part, const ToolPose& pose, double from,
+                                                      const Eigen::Vector3d& nearest, double tip_radius, double step,
+                                                      double height);
+
 // The cutter of a tool whose meridian (z, r) from its tip end is given (an APT profile, a tool end's
 // profile; any unit): from the tip plane z = 0 up, the first radius above the tip standing at z = 0.
 // A ball end's tip on the axis is kept once.

@@ -109,11 +109,18 @@ struct CutterHits {
   std::vector<double> depth;
   std::vector<Eigen::Vector3d> at;
 };
-CutterHits cutter_hits(const SurfaceIndex& target, const Rails& rails, const ToolRadius& tool, int rows, int pose_count,
-                       double tolerance, double slab_tolerance, double step, const SurfaceIndex* design, double design_within) {
+CutterHits cutter_hits(const SurfaceIndex& target, const Rails& rails, const ToolRadius& tool, const std::optional<ToolEnd>& end, int rows,
+                       int pose_count, double tolerance, double slab_tolerance, double step, const SurfaceIndex* design,
+                       double design_within) {
   CutterHits out{std::vector<double>(size_t(rows), -INFINITY), std::vector<Eigen::Vector3d>(size_t(rows), Eigen::Vector3d::Zero())};
+  // The cutter as the job's collision check sees it: with a rounded end (MachinedSurfaceOptions::end),
+  // that end; flat, which holds it, where the tool is too short for it.
   ToolAssembly cutter;
   cutter.cutter = cutter_union(tool, rails.length);
+  if (end && end->kind != EndKind::Flat) try {
+      cutter.cutter = checked_end_profile(cutter.cutter, meridian(tool, rails.length), *end).profile;
+    } catch (const InputError&) {
+    }
   const int P = std::max(pose_count, 2);
   std::vector<ToolPose> poses;
   for (int j = 0; j < P; ++j) {
@@ -167,7 +174,7 @@ PartCheck part_check(const SurfaceIndex& surface, const PatchFit& f, const Patch
   const int rows = f.machined.omega.n_t;
   const CheckSurface& c = o.fit.check;
   return {check_profile(f.fit.rails, f.fit.tool, c, rows, o.fit.samples_s, true, &surface, design_within(o)),
-          cutter_hits(*c.part, f.fit.rails, f.fit.tool, rows, o.fit.samples_t, threshold, c.tolerance, hit_step(o), &surface,
+          cutter_hits(*c.part, f.fit.rails, f.fit.tool, o.machined.end, rows, o.fit.samples_t, threshold, c.tolerance, hit_step(o), &surface,
                       design_within(o))};
 }
 // Its intrusion per row with the cutter's hits counted beyond `threshold` (those deeper than it): the
@@ -448,7 +455,7 @@ PatchFit machine_and_trim(const SurfaceIndex& surface, PatchFit out, const Patch
       ok = ungouged_rows(out.machined, phi_keep);
       if (solid) {
         phi_hits =
-            cutter_hits(surface, out.fit.rails, out.fit.tool, rows, o.fit.samples_t, phi_keep, o.tolerance, hit_step(o), nullptr, 0);
+            cutter_hits(surface, out.fit.rails, out.fit.tool, o.machined.end, rows, o.fit.samples_t, phi_keep, o.tolerance, hit_step(o), nullptr, 0);
         for (size_t i = 0; i < ok.size(); ++i) ok[i] = ok[i] && !std::isfinite(phi_hits.depth[i]);
       }
     }

@@ -188,4 +188,17 @@ EndDistance end_distance(const EndProfile& e, double z, double rho) {
   return out;
 }
 
+EndProfile checked_end_profile(const std::vector<Eigen::Vector2d>& cutter, const std::vector<Eigen::Vector2d>& side,
+                               const ToolEnd& end) {
+  if (end.kind == EndKind::Flat) return end_profile(cutter, end);
+  EndProfile e = end_profile(side, end);
+  // The side meridian ends d(1) sin a short of the axis end where the tool widens towards its holder
+  // (beyond it where it narrows).
+  const double top = cutter.back().x();
+  while (e.profile.size() > size_t(e.end_points) + 2 && e.profile.back().x() >= top) e.profile.pop_back();
+  for (const Eigen::Vector2d& q : cutter)
+    if (q.x() > e.profile.back().x()) e.profile.push_back(q);
+  return e;
+}
+
 }  // namespace flankcam

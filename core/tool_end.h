@@ -45,6 +45,14 @@ struct EndProfile {
 // largest that fits: rc would be negative), or the tool is too short for it.
 [[nodiscard]] EndProfile end_profile(const std::vector<Eigen::Vector2d>& side, const ToolEnd& end, int arc_points = 16);
 
+// The cutter the collision check sees, in one unit: `cutter` the union of the tool's spheres between
+// its end planes (fitting.h's cutter_union), `side` its side meridian (fitting.h's meridian). A flat
+// end: end_profile of the union. A rounded end: end_profile of the side meridian, its points at or
+// above the union's top replaced by the union's there (the tool ends where the union of its spheres
+// does, at its end plane, where the fit put shank and holder).
+[[nodiscard]] EndProfile checked_end_profile(const std::vector<Eigen::Vector2d>& cutter, const std::vector<Eigen::Vector2d>& side,
+                                             const ToolEnd& end);
+
 // The profile's radius at z (z, r points with z increasing): linear between its points, its end
 // radii beyond them.
 [[nodiscard]] double profile_radius(const std::vector<Eigen::Vector2d>& profile, double z);

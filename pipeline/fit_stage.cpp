@@ -235,21 +235,11 @@ void check_job(const Job& job, FittedJob& f, const Progress& progress) {
     p.poses = poses_mm(job, f.frame, r.rails);
     p.assembly = assembly_of(job, f.frame, r);
     // tool.end: the profile ends in it, and a rounded end is the cutter the check sees (tool_end.h).
-    const EndProfile end =
-        end_profile(job.tool.end.kind == EndKind::Flat ? p.assembly.cutter : side_meridian_mm(f.frame, r), job.tool.end);
+    const EndProfile end = checked_end_profile(p.assembly.cutter, side_meridian_mm(f.frame, r), job.tool.end);
     p.profile_mm = end.profile;
     p.end_points = end.end_points;
     p.end_radius_mm = end.radius;
-    if (job.tool.end.kind != EndKind::Flat) {
-      // The side meridian ends d(1) sin a short of the axis end where the tool widens towards its
-      // holder (beyond it where it narrows); the tool ends where the union of its spheres does, at
-      // its end plane, as with a flat end: where the fit put shank and holder (CheckSurface::body).
-      const double top = p.assembly.cutter.back().x();
-      while (p.profile_mm.size() > size_t(p.end_points) + 2 && p.profile_mm.back().x() >= top) p.profile_mm.pop_back();
-      for (const Eigen::Vector2d& q : p.assembly.cutter)
-        if (q.x() > p.profile_mm.back().x()) p.profile_mm.push_back(q);
-      p.assembly = assembly_from_meridian(p.profile_mm, p.assembly);
-    }
+    if (job.tool.end.kind != EndKind::Flat) p.assembly = assembly_from_meridian(p.profile_mm, p.assembly);
     const double half = 0.5 * p.assembly.cutter_length();
     p.contacts.clear();
     for (const ToolPose& q : p.poses) p.contacts.push_back(design.closest(q.tip + half * q.axis).point);

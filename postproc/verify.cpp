@@ -144,6 +144,7 @@ struct Body {
 
 struct AxialSample {
   double z, reach;  // a part point farther than reach from the axis point is beyond the report distance
+  double lo, hi;    // its slab (z from the tip), judged on its own when the nearest point lies beyond the tool's ends
 };
 
 std::vector<AxialSample> axial_samples(const ToolAssembly& a, const VerifyOptions& o) {
@@ -158,7 +159,7 @@ std::vector<AxialSample> axial_samples(const ToolAssembly& a, const VerifyOption
       double r = 0;
       for (double zz : {std::max(z0, z - half), z, std::min(z1, z + half)})
         r = std::max(r, b.radius(std::min(zz, std::nextafter(b.total, 0.0)), &c));
-      s.push_back({z, std::hypot(half, r) + o.report_clearance_mm});
+      s.push_back({z, std::hypot(half, r) + o.report_clearance_mm, std::max(z0, z - half), std::min(z1, z + half)});
     }
   };
   add_range(0, b.L, o.cutter_slab_mm);
@@ -225,18 +226,38 @@ void sweep(const SurfaceIndex& part, const SurfaceIndex* design, const std::vect
           j.slack[k] = f.distance - samples[k].reach;
           if (j.slack[k] > 0) continue;
           Component comp;
-          const double g = body.gap(pose, f.point, &comp);
+          double g = body.gap(pose, f.point, &comp);
+          Eigen::Vector3d point = f.point;
+          // The nearest part point beyond the tool's ends (in the bulge of the sample's ball: a floor
+          // under the tip) can hide a part entering the tool beside it: judged too, as the collision
+          // check does, the nearest part point within the sample's own slab and, at the tip over a
+          // floor, the points under the rim (under_rim_points).
+          const Eigen::Vector3d d = f.point - pose.tip;
+          if (const double zq = d.dot(pose.axis); zq < 0 || zq > body.total) {
+            const auto judge = [&](const Footpoint& q) {
+              Component cq;
+              if (q.face >= 0)
+                if (const double gq = body.gap(pose, q.point, &cq); gq < g) g = gq, comp = cq, point = q.point;
+            };
+            const double base = pose.tip.dot(pose.axis);
+            judge(j.surface->closest_in_slab(c, pose.axis, base + samples[k].lo, base + samples[k].hi));
+            Component tip;
+            if (zq < 0 && samples[k].lo == 0)
+              for (const Footpoint& q : under_rim_points(*j.surface, pose, samples[k].z, f.point, body.radius(0, &tip),
+                                                         j.gouge_tolerance_mm, samples[k].hi))
+                judge(q);
+          }
           double& mc = vb.min_clearance_mm[size_t(comp)];
           mc = std::min(mc, g);
           bool hit = sb.rapid ? g < o.link_clearance_mm : (comp == Component::Tool ? -g > j.gouge_tolerance_mm : g < 0);
           // judge 1, the part without Φ's twin: its coarse edges along the twin's hole are Φ's
-          if (hit && jj == 1 && comp == Component::Tool && left_to_design(*design, f.point, o.apart.design_within_mm)) hit = false;
+          if (hit && jj == 1 && comp == Component::Tool && left_to_design(*design, point, o.apart.design_within_mm)) hit = false;
           if (hit && -g > worst[size_t(comp)].depth_mm) {
             VerifyHit& h = worst[size_t(comp)];
             h.block = sb.block, h.line = sb.line, h.rapid = sb.rapid, h.component = comp;
             h.tool_change = sb.tool_change;
             h.depth_mm = -g;
-            h.point = f.point;
+            h.point = point;
             h.position = int(rep.positions - 1);
           }
         }

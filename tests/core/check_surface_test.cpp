@@ -1022,3 +1022,37 @@ TEST_CASE("a part face meeting the design surface at the cutter's tip is Φ's to
   CHECK(y_end > 27);
   CHECK(machinable(trimmed));
 }
+
+TEST_CASE("the collision check sees a ledge rising into the flat end under the rim, though the part's nearest point lies under the tip") {
+  // The upright cylinder (radius 5, axis x = 5, tip plane z = 5) over y 10-50; for y >= 30 a face
+  // from (0, y, 5 + rise) down to (3, y, 4). The part point nearest to the tip's axis point is the
+  // face's far edge below the tip plane, outside the cutter (before, the check saw nothing, whatever
+  // the rise). The face enters the end face under the rim next to x = 0, at most min(x, rise - (1 +
+  // rise) x / 3) deep: 3 rise / (4 + rise) at x = that depth. The check finds it through the nearest
+  // points in thin slabs over the tip plane and the one nearest to the rim point above it
+  // (under_rim_points), and measures the depth at the part point it found: 0.65 of it or more here.
+  Setup s;
+  PatchFit f;
+  f.fit.rails = upright_rails(s.fr, 5);
+  f.fit.tool = cylinder_of(s.fr, 5);
+  for (const double rise : {1.0, 0.2, 0.05, 0.02, -0.1}) {
+    const TriMesh ledge_mm =
+        test::grid_mesh(2, 16, [&](int i, int j) { return Eigen::Vector3d(3.0 * i, 30 + 2.0 * j, i ? 4.0 : 5 + rise); });
+    const CollisionReport r = collisions_mm(s, f, SurfaceIndex(ledge_mm), 10);
+    const double deepest = 3 * rise / (4 + rise);
+    MESSAGE("rise ", rise, " mm: ", r.intervals.size(), " intervals, ", r.intervals.empty() ? 0.0 : r.intervals.front().max_depth_mm,
+            " mm deep of ", deepest);
+    if (rise < 0) {  // below the tip plane: clear
+      CHECK(r.clear());
+      continue;
+    }
+    REQUIRE(r.intervals.size() == 1);
+    CHECK(r.intervals.front().component == Component::Tool);
+    CHECK(r.intervals.front().max_depth_mm > 0.6 * deepest);
+    CHECK(r.intervals.front().max_depth_mm < deepest + 0.005);
+    // From a pose whose rim reaches y = 30 (next to x = 0 the rim spans y +- up to 2.18 about the axis).
+    const double y_first = s.fr.to_mm(f.fit.rails.a.point(r.intervals.front().pose_begin / 100.0)).y();
+    CHECK(y_first > 26.5);
+    CHECK(y_first <= 30.0 + 1e-9);
+  }
+}

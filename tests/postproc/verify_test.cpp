@@ -222,6 +222,34 @@ TEST_CASE("hourglass tool: the CL-data's axial lead-in gouges the finished flank
   }
 }
 
+TEST_CASE("a ledge rising into the flat end under the rim is a gouge, though the part's nearest point lies under the tip") {
+  // The cone pass along its wall (tip radius 3 at z = 0); for y >= 0 (of the pass' y -20..20) a face
+  // from the wall's foot (3, y, rise) down to the axis (0, y, -1). The part point nearest to the tip's
+  // axis point lies below the tip plane, outside the tool; the face enters the end face under the
+  // rim next to the wall, at most 3 rise / (4 + rise) deep (the cone a little more). Before, the
+  // back-simulation passed it whatever the rise; now it is found, measured at the part point it
+  // found (0.6 of that depth or more here).
+  const Eigen::Vector3d origin(30, 10, -5);
+  const VerifyTool tool{1, assembly_from_meridian(meridian(cone), holder()), 80};
+  for (const double rise : {1.0, 0.3, 0.2, 0.1, 0.05, -0.1}) {
+    const TriMesh ledge = test::grid_mesh(2, 21, [&](int i, int j) { return Eigen::Vector3d(3.0 - 3.0 * i, 1.0 * j, i ? -1.0 : rise); });
+    const SurfaceIndex part(moved(test::merged(wall(cone), ledge), origin));
+    const VerifyReport rep = verify_cl(pass(cone, origin), part, tool, {});
+    double deepest = 0;
+    for (const VerifyHit& h : rep.hits)
+      if (h.component == Component::Tool && !h.rapid) deepest = std::max(deepest, h.depth_mm);
+    const double expected = 3 * rise / (4 + rise);
+    MESSAGE("rise " << rise << " mm: " << rep.hits.size() << " hits, " << deepest << " mm deep of " << expected);
+    if (rise < 0) {
+      CHECK(rep.clean());
+      continue;
+    }
+    REQUIRE_FALSE(rep.clean());
+    CHECK(deepest > 0.55 * expected);
+    CHECK(deepest < 1.1 * expected + 0.01);  // the cone widens 0.1 mm per mm above its tip
+  }
+}
+
 TEST_CASE("the machined design surface: the wall is reached and within tolerance where the pass runs") {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(cone), origin));
