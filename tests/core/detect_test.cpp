@@ -633,7 +633,8 @@ TEST_CASE("a cover that finds no further patch short of max_patches still has it
 TEST_CASE("an exchange round at max_patches replaces the weakest patch by one that brings more" * doctest::test_suite("heavy")) {
   // The twisted flank of the test above with one patch at most: the greedy's patch, found first, is
   // set aside in one exchange round, and the round's search from the whole surface finds a patch
-  // bringing more (51.7% -> 56.6% within 0.02 mm), which takes its place.
+  // bringing more (49.3% -> 56.0% within 0.02 mm; 51.7% -> 56.6% before session 46's changes to the
+  // trims and the collision check), which takes its place.
   const TwistedFlank t;
   CoverOptions o = cylinders_with_part(t.fr, t.floor, 0.02);
   o.max_patches = 1;
@@ -646,7 +647,7 @@ TEST_CASE("an exchange round at max_patches replaces the weakest patch by one th
           " exchanged, overcut ", t.fr.length_to_mm(d.overcut), " mm");
   CHECK(d.patches.size() == 1);
   CHECK(rounds == 1);
-  CHECK(greedy > 0.5);
+  CHECK(greedy > 0.45);
   CHECK(d.exchanged == 1);
   CHECK(returned == 0);
   CHECK(d.coverage >= greedy + 0.03);
