@@ -227,8 +227,8 @@ TEST_CASE("a ledge rising into the flat end under the rim is a gouge, though the
   // from the wall's foot (3, y, rise) down to the axis (0, y, -1). The part point nearest to the tip's
   // axis point lies below the tip plane, outside the tool; the face enters the end face under the
   // rim next to the wall, at most 3 rise / (4 + rise) deep (the cone a little more). Before, the
-  // back-simulation passed it whatever the rise; now it is found, measured at the part point it
-  // found (0.6 of that depth or more here).
+  // back-simulation measured the 1 mm rise 0.154 mm deep and passed the 0.3 mm rise and every lower
+  // one; now each is found, measured at the part point it found (0.6 of that depth or more here).
   const Eigen::Vector3d origin(30, 10, -5);
   const VerifyTool tool{1, assembly_from_meridian(meridian(cone), holder()), 80};
   for (const double rise : {1.0, 0.3, 0.2, 0.1, 0.05, -0.1}) {
