@@ -150,15 +150,15 @@ struct Hit {
 
 }  // namespace
 
-std::vector<Footpoint> under_rim_points(const SurfaceIndex& part, const ToolPose& pose, double from,
-                                        const Eigen::Vector3d& nearest, double tip_radius, double step, double height) {
-  std::vector<Footpoint> out;
-  if (!(step > 0) || !(height > 0)) return out;
-  const Eigen::Vector3d axis = pose.axis.normalized(), c = pose.tip + from * axis;
+std::vector<Footpoint> beside_nearest_points(const SurfaceIndex& part, const ToolPose& pose, double z, double lo, double hi,
+                                             const Eigen::Vector3d& nearest, double tip_radius, double step) {
+  const Eigen::Vector3d axis = pose.axis.normalized(), c = pose.tip + z * axis;
   const double base = pose.tip.dot(axis);
-  for (double lo = 0, hi = std::min(step, height); lo < height; lo = hi, hi = std::min(2 * hi, height))
-    out.push_back(part.closest_in_slab(c, axis, base + lo, base + hi));
   const Eigen::Vector3d d = nearest - pose.tip, radial = d - d.dot(axis) * axis;
+  if (lo != 0 || !(d.dot(axis) < 0) || !(step > 0) || !(hi > 0)) return {part.closest_in_slab(c, axis, base + lo, base + hi)};
+  std::vector<Footpoint> out;
+  for (double a = 0, b = std::min(step, hi); a < hi; a = b, b = std::min(2 * b, hi))
+    out.push_back(part.closest_in_slab(c, axis, base + a, base + b));
   if (radial.norm() > 1e-9 * (1 + tip_radius)) out.push_back(part.closest(pose.tip + tip_radius * radial.normalized()));
   return out;
 }
@@ -315,13 +315,9 @@ CollisionReport check_collisions(const SurfaceIndex& part, const std::vector<Too
         h.depth = depth_at(f.point);
         if (!std::isfinite(h.depth)) {
           // The nearest part point lies beyond the cutter's end, in the bulge of the sample's ball: it
-          // can hide a part entering the cutter beside it. Judged instead: the nearest part point
-          // within the sample's own slab, and at the tip over a floor the points under the rim.
-          const double base = at.tip.dot(at.axis);
-          std::vector<Footpoint> candidates{part.closest_in_slab(c, at.axis, base + s.lo, base + s.hi)};
-          if (s.lo == 0 && (f.point - at.tip).dot(at.axis) < 0)
-            for (const Footpoint& q : under_rim_points(part, at, s.z, f.point, cutter_radius(tool, 0), o.gouge_tolerance_mm, s.hi))
-              candidates.push_back(q);
+          // can hide a part entering the cutter beside it, judged instead (beside_nearest_points).
+          const std::vector<Footpoint> candidates =
+              beside_nearest_points(part, at, s.z, s.lo, s.hi, f.point, cutter_radius(tool, 0), o.gouge_tolerance_mm);
           queries[size_t(k)] += long(candidates.size());
           for (const Footpoint& q : candidates)
             if (q.face >= 0)

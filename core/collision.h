@@ -87,18 +87,19 @@ struct CollisionReport {
   return design.closest(part_point).distance <= within_mm;
 }
 
-// Part points that may stand inside a tool's flat tip end under its rim when the part point nearest
-// to an axis point near the tip (`nearest`) lies below the tip plane: a floor under the tip hides a
-// ledge, or a hub rising towards the blade, that enters the end face beside it. For the axis point
-// `from` (z from the tip in [0, height]): the nearest part points within the slabs [0, step], [step,
-// 2 step], [2 step, 4 step], ... up to `height` over the tip plane (within a slab the one nearest the
-// axis point stands at its floor, so the thin slabs next to the tip plane find an intrusion step
-// deep or deeper to within half its depth), and the one nearest to the rim point (`tip_radius` off the
-// axis) on the side of `nearest`, where a tilted end meets a floor first. Callers judge them with
-// their own solid (check_collisions, the back-simulation's sweep).
-[[nodiscard]] std::vector<Footpoint> under_rim_points(const SurfaceIndex& part, const ToolPose& pose, double from,
-                                                      const Eigen::Vector3d& nearest, double tip_radius, double step,
-                                                      double height);
+// Part points that may stand inside a tool beside an axis sample whose nearest part point
+// (`nearest`) lies beyond the tool's ends, in the bulge of the sample's ball; callers judge them with
+// their own solid (check_collisions, the back-simulation's sweep). The sample stands `z` from the tip,
+// its slab is [lo, hi]. Its slab's own nearest part point; for the tip's sample (lo = 0) over a floor
+// (`nearest` below the tip plane), which hides a ledge or a hub rising into the end face under the
+// rim, instead the nearest part points within [0, step], [step, 2 step], [2 step, 4 step], ... up to
+// `hi` (within a slab the one nearest the axis point stands at its floor, so the thin slabs next to
+// the tip plane find an intrusion step deep or deeper to within half its depth; the nearest of them
+// is the whole slab's), and the one nearest to the rim point (`tip_radius` off the axis) on the side
+// of `nearest`, where a tilted end meets a floor first.
+[[nodiscard]] std::vector<Footpoint> beside_nearest_points(const SurfaceIndex& part, const ToolPose& pose, double z, double lo,
+                                                           double hi, const Eigen::Vector3d& nearest, double tip_radius,
+                                                           double step);
 
 // The cutter of a tool whose meridian (z, r) from its tip end is given (an APT profile, a tool end's
 // profile; any unit): from the tip plane z = 0 up, the first radius above the tip standing at z = 0.

@@ -230,22 +230,15 @@ void sweep(const SurfaceIndex& part, const SurfaceIndex* design, const std::vect
           Eigen::Vector3d point = f.point;
           // The nearest part point beyond the tool's ends (in the bulge of the sample's ball: a floor
           // under the tip) can hide a part entering the tool beside it: judged too, as the collision
-          // check does, the nearest part point within the sample's own slab and, at the tip over a
-          // floor, the points under the rim (under_rim_points).
-          const Eigen::Vector3d d = f.point - pose.tip;
-          if (const double zq = d.dot(pose.axis); zq < 0 || zq > body.total) {
-            const auto judge = [&](const Footpoint& q) {
+          // check does (beside_nearest_points).
+          if (const double zq = (f.point - pose.tip).dot(pose.axis); zq < 0 || zq > body.total) {
+            Component tip;
+            for (const Footpoint& q : beside_nearest_points(*j.surface, pose, samples[k].z, samples[k].lo, samples[k].hi, f.point,
+                                                            body.radius(0, &tip), j.gouge_tolerance_mm)) {
               Component cq;
               if (q.face >= 0)
                 if (const double gq = body.gap(pose, q.point, &cq); gq < g) g = gq, comp = cq, point = q.point;
-            };
-            const double base = pose.tip.dot(pose.axis);
-            judge(j.surface->closest_in_slab(c, pose.axis, base + samples[k].lo, base + samples[k].hi));
-            Component tip;
-            if (zq < 0 && samples[k].lo == 0)
-              for (const Footpoint& q : under_rim_points(*j.surface, pose, samples[k].z, f.point, body.radius(0, &tip),
-                                                         j.gouge_tolerance_mm, samples[k].hi))
-                judge(q);
+            }
           }
           double& mc = vb.min_clearance_mm[size_t(comp)];
           mc = std::min(mc, g);

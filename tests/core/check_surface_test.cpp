@@ -1030,7 +1030,7 @@ TEST_CASE("the collision check sees a ledge rising into the flat end under the r
   // the rise). The face enters the end face under the rim next to x = 0, at most min(x, rise - (1 +
   // rise) x / 3) deep: 3 rise / (4 + rise) at x = that depth. The check finds it through the nearest
   // points in thin slabs over the tip plane and the one nearest to the rim point above it
-  // (under_rim_points), and measures the depth at the part point it found: 0.65 of it or more here.
+  // (beside_nearest_points), and measures the depth at the part point it found: 0.6 of it or more here.
   Setup s;
   PatchFit f;
   f.fit.rails = upright_rails(s.fr, 5);
