@@ -147,6 +147,9 @@ VerifyRun verify(const VerifyRequest& request, const Progress& progress) {
   if (std::optional<LoadedMesh> part = load_job_part(job)) separate.emplace(to_work(job.post, std::move(part->mesh)));
   VerifyOptions vo;
   vo.gouge_tolerance_mm = job.tolerance_mm;
+  // Rapids keep the job's clearance, as the run's own back-simulation holds the links it plans to it:
+  // a rapid off the part but inside it is a finding (kind "clearance"), not a clean program.
+  vo.link_clearance_mm = job.clearance_mm;
   vo.cl_tolerance_mm = job.post.tolerance_mm + VerifyOptions{}.cl_tolerance_mm - PostJob{}.tolerance_mm;
   vo.cl_angle_tolerance_deg = job.post.angle_tolerance_deg + VerifyOptions{}.cl_angle_tolerance_deg - PostJob{}.angle_tolerance_deg;
   VerifyRun run{std::move(job), std::move(m), vo, std::move(design), separate ? separate->mesh() : TriMesh{}, {}};
@@ -268,14 +271,15 @@ void write_verify(const VerifyRun& run, OutputDir& out) {
   report["machine"] = m.name;
   report["units"] = "mm";
   report["gouge_tolerance_mm"] = vo.gouge_tolerance_mm;
+  report["rapid_clearance_mm"] = vo.link_clearance_mm;
   auto& programs = report["programs"] = nlohmann::ordered_json::array();
   HtmlReport html;
   html.title = "flankcam verify: " + job.file.filename().string();
   html.intro = {fmt::format("Back-simulation of each program from its text through {} ({}) against {} with the cutter "
                             "from its meridian, shank and holder from the job. Feed blocks may cut {} mm into the part "
-                            "(the job's tolerance); rapids must not touch it.",
-                            m.name, m.kind(), job.part.filename().string(), vo.gouge_tolerance_mm)};
-  html.columns = {"program", "verdict", "blocks", "min rapid clearance", "collisions / gouges", "axis violations", "cycle min",
+                            "(the job's tolerance); rapids must keep {} mm from it (the job's clearance).",
+                            m.name, m.kind(), job.part.filename().string(), vo.gouge_tolerance_mm, vo.link_clearance_mm)};
+  html.columns = {"program", "verdict", "blocks", "min rapid clearance", "hits", "axis violations", "cycle min",
                   "coverage"};
   for (const VerifiedProgram& r : run.programs) {
     const VerifyReport& v = r.report;
@@ -337,9 +341,9 @@ void write_verify(const VerifyRun& run, OutputDir& out) {
     HtmlSection sec;
     sec.heading = fs::path(r.file).filename().string();
     for (const VerifyHit& h : v.hits)
-      sec.warnings.push_back(fmt::format("line {}: {} {} {:.3f} mm deep at ({:.3f}, {:.3f}, {:.3f}) ({} block)", h.line,
-                                         to_string(h.component), h.kind(), h.depth_mm, h.point.x(), h.point.y(),
-                                         h.point.z(), h.rapid ? "rapid" : "feed"));
+      sec.warnings.push_back(fmt::format("line {}: {} at ({:.3f}, {:.3f}, {:.3f}) ({} block)", h.line,
+                                         h.what(v.link_clearance_mm), h.point.x(), h.point.y(), h.point.z(),
+                                         h.rapid ? "rapid" : "feed"));
     for (const AxisViolation& a : v.violations)
       sec.warnings.push_back(fmt::format("line {}: {} {} {:.4f} beyond {:.4f}", a.line, a.axis,
                                          a.speed ? "speed" : "travel", a.value, a.limit));
@@ -354,7 +358,10 @@ void write_verify(const VerifyRun& run, OutputDir& out) {
                                                                  v.design.reached)}};
     std::vector<SvgHitMarker> markers;
     for (const VerifyHit& h : v.hits)
-      markers.push_back({h.point, fmt::format("L{} {} {:.2f}", h.line, to_string(h.component), h.depth_mm), h.kind() == "gouge"});
+      markers.push_back({h.point,
+                         h.kind() == "clearance" ? fmt::format("L{} {} {:.2f} off", h.line, to_string(h.component), -h.depth_mm)
+                                                 : fmt::format("L{} {} {:.2f}", h.line, to_string(h.component), h.depth_mm),
+                         h.kind() == "gouge"});
     sec.svgs.push_back(deviation_map_svg(run.design.mesh(), v.design.deviation_mm, vo.gouge_tolerance_mm, {}, r.meridian,
                                          fmt::format("{}: machined deviation of the design surface, hits marked",
                                                      fs::path(r.file).filename().string()),

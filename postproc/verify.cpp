@@ -27,22 +27,32 @@ std::string VerifyOptions::validate() const {
   return {};
 }
 
-std::string VerifyHit::kind() const { return !rapid && component == Component::Tool ? "gouge" : "collision"; }
+std::string VerifyHit::kind() const {
+  if (!rapid && component == Component::Tool) return "gouge";
+  return depth_mm > 0 ? "collision" : "clearance";
+}
+
+std::string VerifyHit::what(double clearance_mm) const {
+  if (kind() == "clearance")
+    return fmt::format("{} {:.4f} mm from the part, inside the rapid clearance of {} mm", to_string(component), -depth_mm,
+                       clearance_mm);
+  return fmt::format("{} {} {:.4f} mm deep", to_string(component), kind(), depth_mm);
+}
 
 std::string VerifyReport::first_problem(const std::string& file) const {
   if (clean()) return {};
   int first = INT_MAX;
   for (const VerifyHit& h : hits) first = std::min(first, h.line);
   for (const ClDeviation& d : cl_deviations) first = std::min(first, d.line);
-  const std::string tail = fmt::format("; {} block(s) hit the part, {} cutting block(s) off the CL-data", hits.size(),
-                                       cl_deviations.size());
+  const std::string tail = fmt::format("; {} block(s) hit the part or come inside the rapid clearance, {} cutting block(s) off the CL-data",
+                                       hits.size(), cl_deviations.size());
   const VerifyHit* worst = nullptr;  // the first line's deepest hit
   for (const VerifyHit& h : hits)
     if (h.line == first && (!worst || h.depth_mm > worst->depth_mm)) worst = &h;
   if (worst) {
     const VerifyHit& h = *worst;
-    return fmt::format("{}:{}: {} {} {:.4f} mm deep at ({:.3f}, {:.3f}, {:.3f}) in {} {} ({})", file, h.line,
-                       to_string(h.component), h.kind(), h.depth_mm, h.point.x(), h.point.y(), h.point.z(),
+    return fmt::format("{}:{}: {} at ({:.3f}, {:.3f}, {:.3f}) in {} {} ({})", file, h.line, h.what(link_clearance_mm),
+                       h.point.x(), h.point.y(), h.point.z(),
                        h.tool_change ? "the tool change before motion block" : "motion block", h.block,
                        h.tool_change ? "tool change" : h.rapid ? "rapid" : "feed") +
            tail;
@@ -499,6 +509,7 @@ VerifyReport verify_program(const std::vector<NcPoint>& program, const Machine& 
   if (std::string why = o.validate(); !why.empty()) throw InputError("verify options: " + why);
   if (tools.empty()) throw InputError("verify: no tool");
   VerifyReport rep;
+  rep.link_clearance_mm = o.link_clearance_mm;
   if (program.empty()) return rep;
   // Values not yet stated at the start (the first blocks state Z, then the angles, then X Y) are
   // taken from where they are first stated: the simulation starts at the program's first position.
@@ -636,6 +647,7 @@ VerifyReport verify_cl(const ClProgram& cl, const SurfaceIndex& part, const Veri
                        const SurfaceIndex* design) {
   if (std::string why = o.validate(); !why.empty()) throw InputError("verify options: " + why);
   VerifyReport rep;
+  rep.link_clearance_mm = o.link_clearance_mm;
   std::vector<SimBlock> blocks;
   for (size_t i = 0; i < cl.moves.size(); ++i) {
     const ClMove& mv = cl.moves[i];

@@ -90,10 +90,17 @@ struct VerifyHit {
   bool rapid = false;
   bool tool_change = false;  // in the tool-change macro's moves before `line`
   Component component = Component::Tool;
-  double depth_mm = 0;                            // how far inside the part (beyond nothing: raw depth)
+  // How far inside the part (beyond nothing: raw depth); <= 0 in a rapid that keeps off the part but
+  // comes inside the rapid clearance (VerifyOptions::link_clearance_mm): minus its distance from it.
+  double depth_mm = 0;
   Eigen::Vector3d point = Eigen::Vector3d::Zero();  // the part point there (program frame)
   int position = -1;                                // the deepest position: index into VerifyReport::motion
-  [[nodiscard]] std::string kind() const;          // "gouge" (the cutter in a feed block) or "collision"
+  // "gouge" (the cutter in a feed block), "collision" (anything else inside the part) or "clearance"
+  // (a rapid off the part but inside the rapid clearance).
+  [[nodiscard]] std::string kind() const;
+  // "holder collision 1.2340 mm deep", "cutter gouge 0.0300 mm deep" or "shank 0.0198 mm from the
+  // part, inside the rapid clearance of 0.5 mm" (`clearance_mm`: VerifyReport::link_clearance_mm).
+  [[nodiscard]] std::string what(double clearance_mm) const;
 };
 
 struct AxisViolation {
@@ -120,6 +127,7 @@ struct VerifiedPosition {
 };
 
 struct VerifyReport {
+  double link_clearance_mm = 0;  // what the rapids were judged against (VerifyOptions)
   std::vector<VerifiedBlock> blocks;
   std::vector<VerifyHit> hits;            // worst per block and component
   std::vector<AxisViolation> violations;  // travel limits and speeds
@@ -134,7 +142,8 @@ struct VerifyReport {
   Deviation design;                       // empty unless a design surface was given
   [[nodiscard]] bool clean() const { return hits.empty() && cl_deviations.empty(); }
   // "FILE:LINE: holder collision 1.234 mm deep at (x, y, z) in motion block B (rapid); ..." for the
-  // first line that hits the part or leaves the CL-data (its deepest hit), or "".
+  // first line that hits the part, comes inside the rapid clearance or leaves the CL-data (its
+  // deepest hit), or "".
   [[nodiscard]] std::string first_problem(const std::string& file) const;
 };
 

@@ -82,8 +82,7 @@ ViewerScene verify_view(const TriMesh& surface_mm, const TriMesh& part_mm, doubl
     for (const VerifyHit& h : r.hits) {
       ViewerMarker m;
       m.at_mm = h.point;
-      m.label = fmt::format("{} line {}: {} {} {:.3f} mm deep ({})", p.name, h.line, to_string(h.component), h.kind(),
-                            h.depth_mm, h.rapid ? "rapid" : "feed");
+      m.label = fmt::format("{} line {}: {} ({})", p.name, h.line, h.what(r.link_clearance_mm), h.rapid ? "rapid" : "feed");
       m.frames.assign(v.tracks.size(), -1);
       const bool known = h.position >= 0 && size_t(h.position) < r.motion.size();
       if (known) {

@@ -119,6 +119,52 @@ TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm in
     CHECK(r.out.find("cone-1.ngc: clean") != std::string::npos);
   }
 
+  SUBCASE("rapids are judged against the job's clearance: inside it a finding with its line and distance, exit 4") {
+    // The same program verified with jobs that differ from the run's only in `clearance`: just below
+    // the program's closest rapid it is clean, above it that rapid is a clearance finding.
+    const Output r0 = run_program("verify --job " + job + " " + program + " --out " + dir.file("v0"), dir);
+    REQUIRE(r0.code == 0);
+    const auto clean = nlohmann::json::parse(test::read_text(dir.file("v0/verify.json")));
+    CHECK(double(clean["rapid_clearance_mm"]) == 1);  // the job's
+    double closest = INFINITY;
+    for (const char* part : {"cutter", "shank", "holder"})
+      closest = std::min(closest, double(clean["programs"][0]["min_clearance_rapid_mm"][part]));
+    REQUIRE(closest >= 1);
+    REQUIRE(closest < 20);
+    const std::string source = test::read_text(job);
+    const auto job_with = [&](double clearance, const std::string& name) {
+      std::string text = source;
+      const std::string surface = "surface: ../blade/blade.obj", given = "clearance: 1\n";
+      REQUIRE(text.find(surface) != std::string::npos);
+      REQUIRE(text.find(given) != std::string::npos);
+      text.replace(text.find(surface), surface.size(), "surface: " + std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj");
+      text.replace(text.find(given), given.size(), fmt::format("clearance: {}\n", clearance));
+      const std::string path = dir.file(name);
+      test::write_text(path, text);
+      return path;
+    };
+    const Output below = run_program("verify --job " + job_with(closest - 0.05, "below.yaml") + " " + program + " --out " + dir.file("vb"), dir);
+    INFO(below.out, below.err);
+    CHECK(below.code == 0);
+    const double wide = closest + 0.5;
+    const Output above = run_program("verify --job " + job_with(wide, "above.yaml") + " " + program + " --out " + dir.file("va"), dir);
+    INFO(above.out, above.err);
+    CHECK(above.code == 4);
+    CHECK(above.out.find(fmt::format("inside the rapid clearance of {} mm", wide)) != std::string::npos);
+    const auto report = nlohmann::json::parse(test::read_text(dir.file("va/verify.json")));
+    const auto& p = report["programs"][0];
+    CHECK(p["clean"] == false);
+    double nearest = INFINITY;
+    for (const auto& h : p["collisions_and_gouges"]) {
+      CHECK(h["motion"] != "feed");
+      CHECK(h["kind"] == "clearance");
+      CHECK(double(h["depth_mm"]) <= 0);
+      CHECK(-double(h["depth_mm"]) < wide);
+      nearest = std::min(nearest, -double(h["depth_mm"]));
+    }
+    CHECK(nearest == doctest::Approx(closest).epsilon(1e-3));
+  }
+
   SUBCASE("one cutting block moved 1 mm sideways into the blade: exit 4 naming that line") {
     // A modal feed block well inside the cut: 20 lines after the first G1.
     const std::vector<std::string> lines = split_lines(test::read_text(program));

@@ -202,6 +202,56 @@ TEST_CASE("a rapid through the part is a collision on its line") {
   MESSAGE("rapid through the wall: " << rep.first_problem("wall"));
 }
 
+TEST_CASE("a rapid off the part but inside the rapid clearance is a finding of its own, with its distance") {
+  // The cone's rapid along its wall (tip radius 3, widening 0.1 per mm: the wall x = 3 + 0.1 z), the
+  // axis upright, `offset` mm from the cut in x: |offset| / sqrt(1.01) from the wall, inside it for
+  // offset > 0. Before, verify --job judged rapids against no clearance: a plunge 0.020 mm from the
+  // HECC impeller's part in a program of a 0.5 mm job was "clean".
+  const Eigen::Vector3d origin(30, 10, -5);
+  const SurfaceIndex part(moved(wall(cone), origin));
+  const VerifyTool tool{1, assembly_from_meridian(meridian(cone), holder()), 80};
+  const auto rapid_at = [&](double offset) {
+    ClProgram cl;
+    cl.tool = 1;
+    for (const double y : {-20.0, 20.0})
+      cl.moves.push_back({{origin + Eigen::Vector3d(offset, y, 0), Eigen::Vector3d::UnitZ()}, true, 0});
+    return cl;
+  };
+  const double off = 0.3 / std::sqrt(1.01);
+  VerifyOptions o;
+  o.link_clearance_mm = 0.5;
+  const VerifyReport near = verify_cl(rapid_at(-0.3), part, tool, o);
+  REQUIRE(near.hits.size() == 2);  // the rapid to its start and the one along the wall (blocks 0 and 1)
+  for (const VerifyHit& h : near.hits) {
+    CHECK(h.rapid);
+    CHECK(h.component == Component::Tool);
+    CHECK(h.kind() == "clearance");
+    CHECK(-h.depth_mm == doctest::Approx(off).epsilon(0.01));
+  }
+  CHECK(near.blocks.at(1).min_clearance_mm[0] == doctest::Approx(off).epsilon(0.01));
+  const std::string problem = near.first_problem("near.apt");
+  MESSAGE(problem);
+  CHECK(problem.rfind(fmt::format("near.apt:1: tool {:.4f} mm from the part, inside the rapid clearance of 0.5 mm at (",
+                                  -near.hits.front().depth_mm),
+                      0) == 0);
+  // Judged against a clearance it keeps: clean, its clearance reported.
+  o.link_clearance_mm = 0.25;
+  const VerifyReport kept = verify_cl(rapid_at(-0.3), part, tool, o);
+  CHECK(kept.clean());
+  CHECK(kept.blocks.at(1).min_clearance_mm[0] == doctest::Approx(off).epsilon(0.01));
+  // Into the wall: a collision, whatever the clearance.
+  for (const double c : {0.0, 0.5}) {
+    o.link_clearance_mm = c;
+    const VerifyReport into = verify_cl(rapid_at(0.3), part, tool, o);
+    REQUIRE(into.hits.size() == 2);
+    for (const VerifyHit& h : into.hits) {
+      CHECK(h.kind() == "collision");
+      CHECK(h.depth_mm == doctest::Approx(off).epsilon(0.01));
+    }
+    CHECK(into.first_problem("into.apt").rfind(fmt::format("into.apt:1: tool collision {:.4f} mm deep at (", into.hits.front().depth_mm), 0) == 0);
+  }
+}
+
 TEST_CASE("hourglass tool: the CL-data's axial lead-in gouges the finished flank, the planned normal lead does not" * doctest::test_suite("heavy")) {
   const Eigen::Vector3d origin(30, 10, -5);
   const SurfaceIndex part(moved(wall(hourglass), origin));
