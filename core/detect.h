@@ -65,8 +65,9 @@ struct CoverOptions {
   bool across = false;
   std::optional<Eigen::Vector3d> width;  // unset: the surface's own middle extent axis
   // Each round's best patch continued past the ends of its motion where its last row of Ω still lies
-  // over Φ (detect.cpp, `continued`). Off for the one-patch search of an uncovered region: its patch
-  // is continued on the whole surface, as the round's best, where its end is judged.
+  // over Φ (detect.cpp, `continued`), and each patch of the chosen cover again in finish_cover (with a
+  // part). Off for the one-patch search of an uncovered region: its patch is continued on the whole
+  // surface, as the round's best, where its end is judged.
   bool continue_ends = true;
   // With a part, once the cover is chosen: each patch with its cutter made longer at its holder end
   // where that end stops inside Φ (finish_cover; custom tools, not shared), kept when the union's
@@ -165,7 +166,10 @@ struct Detection {
 //    tip (lengthened_at_tip), not only the one that brings most;
 //  - then the winner with its cutter made longer at its holder end (CoverOptions::reach_further)
 //    where that end's column of Ω still lies over Φ (lengthened_to_reach: by 10%, 25%, 50% of its
-//    length and to the tool's max_length), judged as a candidate.
+//    length and to the tool's max_length), judged as a candidate;
+//  - then the winner with its motion continued past its ends (CoverOptions::continue_ends: by steps
+//    of 5% of it, at most 20% an end, its tool held, while it brings more of what the others leave),
+//    judged against the part as the floor pass judges.
 // The variant under which the union's coverage of Φ grows most replaces the patch in `cover`. A
 // patch is judged again once another has been replaced since (CoverOptions::finish_sweeps); its floor
 // variants, which depend on the patch alone, are kept until it is replaced, so judging it again only

@@ -642,6 +642,7 @@ TEST_CASE("detection's last pass makes a cutter stopping inside the flank longer
   REQUIRE(machinable(tall));
   CoverOptions co;
   co.patch = po;
+  co.continue_ends = false;  // the motion continued past its ends: a test of its own (below)
   std::vector<PatchFit> alone{low};
   std::vector<size_t> seen;
   const std::vector<size_t> replaced = finish_cover(s.phi, alone, co, [&](size_t k, double) { seen.push_back(k); });
@@ -668,6 +669,56 @@ TEST_CASE("detection's last pass makes a cutter stopping inside the flank longer
   co.patch = s.patch_options();
   CHECK(finish_cover(s.phi, again, co).empty());
   CHECK(again[0].reach_lengthened == 0.0);
+}
+
+TEST_CASE("detection's last pass continues a patch's motion past its ends where the union grows, judged against the part") {
+  // A cover of one patch whose motion runs over y 5..50 mm of the 60 mm flank (upright lines, the
+  // tip over a floor 3 mm under it). The last pass continues the motion past both ends by steps of 5%
+  // of it (at most 20% an end; an end beyond Φ is not continued further), fits it again with its tool
+  // held and judges it against the part: it machines the flank's width. A patch beside it that
+  // machines those ends already leaves nothing to gain: nothing is replaced.
+  Setup s;
+  const SurfaceIndex floor(to_unit(test::box_mesh({0, -20, -10}, {30, 80, -3}, 4), s.fr));
+  const PatchOptions po = s.over_hub(floor);
+  const PatchFit mid = fit_patch(s.phi, s.upright(), po);
+  REQUIRE(machinable(mid));
+  const auto reach_y = [&](const PatchFit& f) {
+    double lo = INFINITY, hi = -INFINITY;
+    for (size_t v = 0; v < s.phi_mm.vertices.size(); ++v)
+      if (std::isfinite(f.machined.design_deviation[v]) && std::abs(f.machined.design_deviation[v]) <= po.tolerance)
+        lo = std::min(lo, s.phi_mm.vertices[v].y()), hi = std::max(hi, s.phi_mm.vertices[v].y());
+    return std::pair{lo, hi};
+  };
+  CoverOptions co;
+  co.patch = po;
+  co.reach_further = false;
+  std::vector<PatchFit> cover{mid};
+  const std::vector<size_t> replaced = finish_cover(s.phi, cover, co);
+  const PatchFit& c = cover[0];
+  MESSAGE("coverage ", mid.coverage, " -> ", c.coverage, ", y ", reach_y(mid).first, "..", reach_y(mid).second, " -> ",
+          reach_y(c).first, "..", reach_y(c).second, " mm, t ", c.t_from, "..", c.t_to, ", tip z ", s.lowest_tip_z(mid.fit.rails),
+          " -> ", s.lowest_tip_z(c.fit.rails), " mm");
+  CHECK(reach_y(mid).first >= 4);
+  CHECK(reach_y(mid).second <= 51);
+  REQUIRE(replaced == std::vector<size_t>{0});
+  CHECK(c.t_from < 0);
+  CHECK(c.t_to > 1);
+  CHECK(reach_y(c).first <= 0.5);   // the flank's start (y 0)
+  CHECK(reach_y(c).second >= 57.5);  // 20% of the 45 mm motion past y 50: y 59
+  CHECK(c.coverage > mid.coverage + 0.1);
+  CHECK(machinable(c));
+  double overcut = 0;
+  for (const double d : c.machined.design_deviation)
+    if (std::isfinite(d)) overcut = std::max(overcut, -d);
+  CHECK(overcut <= po.tolerance);
+  CHECK(c.fit.tool.D == mid.fit.tool.D);  // the tool held
+  CHECK(s.lowest_tip_z(c.fit.rails) >= -3 + 0.005 - 1e-6);  // clear of the floor
+  // Not continued (CoverOptions::continue_ends off; nothing else to offer here): as it was.
+  co.continue_ends = false;
+  std::vector<PatchFit> kept{mid};
+  CHECK(finish_cover(s.phi, kept, co).empty());
+  CHECK(kept[0].t_from == 0);
+  CHECK(kept[0].t_to == 1);
 }
 
 // test::steep_flank (the plane x = 0.25 z, y 0..60, z 0..30 mm) over its floor z <= 0, the tool on
@@ -722,6 +773,7 @@ struct SteepFlankCover {
     co.patch = po;
     co.end = ToolEnd{};
     co.floor_tip = fr.length_to_unit(0.75);
+    co.continue_ends = false;  // the motions run over the flank's whole width
     return co;
   }
 };
