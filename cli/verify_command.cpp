@@ -1,7 +1,8 @@
 // `flankcam verify --job JOB.yaml PROGRAM [PROGRAM ...] --out DIR`: back-simulates NC programs (any
 // of the four dialects, by extension) or APT CL-data through the job's machine against its part
 // (pipeline::verify), and writes verify.json and verify.html. Exit 0 clean, 4 collision, gouge, a
-// rapid inside the job's clearance or a cutting block off the CL-data, 2 bad input. This file only parses arguments and prints.
+// rapid inside the job's clearance or a cutting block off the CL-data, 2 bad input. This file only
+// parses arguments and prints.
 #include <fmt/format.h>
 
 #include "cli/commands.h"
@@ -38,8 +39,8 @@ int run_verify(const VerifyArgs& args) {
       if (!r.cl_note.empty()) fmt::print("{}: {}\n", r.file, r.cl_note);
     }
   if (const int bad = run.failing(); bad > 0) {
-    fmt::print(stderr, "flankcam verify: {} of {} program(s) collide or gouge, or come inside the rapid clearance (verify.json)\n", bad,
-               run.programs.size());
+    fmt::print(stderr, "flankcam verify: {} of {} program(s) collide or gouge, or come inside the rapid clearance (verify.json)\n",
+               bad, run.programs.size());
     return 4;
   }
   return 0;

@@ -49,7 +49,8 @@ struct VerifyRun {
   SurfaceIndex design;  // the job's surface in the work frame (the coverage and the deviation map)
   TriMesh part_mm;      // the job's separate part in the work frame; empty: the surface is the part
   std::vector<VerifiedProgram> programs;  // in the order requested
-  [[nodiscard]] int failing() const;      // programs that collide, gouge, keep a rapid inside the clearance or leave the CL-data (not clean)
+  // Programs that are not clean: they collide, gouge, keep a rapid inside the clearance or leave the CL-data.
+  [[nodiscard]] int failing() const;
 };
 
 // NAME-tool.csv: "# comment", "z_mm,r_mm", then z,r rows (mm). Throws InputError with file:line.

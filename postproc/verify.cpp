@@ -44,8 +44,9 @@ std::string VerifyReport::first_problem(const std::string& file) const {
   int first = INT_MAX;
   for (const VerifyHit& h : hits) first = std::min(first, h.line);
   for (const ClDeviation& d : cl_deviations) first = std::min(first, d.line);
-  const std::string tail = fmt::format("; {} block(s) hit the part or come inside the rapid clearance, {} cutting block(s) off the CL-data",
-                                       hits.size(), cl_deviations.size());
+  const std::string tail =
+      fmt::format("; {} block(s) hit the part or come inside the rapid clearance, {} cutting block(s) off the CL-data",
+                  hits.size(), cl_deviations.size());
   const VerifyHit* worst = nullptr;  // the first line's deepest hit
   for (const VerifyHit& h : hits)
     if (h.line == first && (!worst || h.depth_mm > worst->depth_mm)) worst = &h;

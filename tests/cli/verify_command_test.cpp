@@ -137,17 +137,20 @@ TEST_CASE("flankcam verify: the conical-tool run is clean, a block moved 1 mm in
       const std::string surface = "surface: ../blade/blade.obj", given = "clearance: 1\n";
       REQUIRE(text.find(surface) != std::string::npos);
       REQUIRE(text.find(given) != std::string::npos);
-      text.replace(text.find(surface), surface.size(), "surface: " + std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj");
+      text.replace(text.find(surface), surface.size(),
+                   "surface: " + std::string(FLANKCAM_SOURCE_DIR) + "/examples/blade/blade.obj");
       text.replace(text.find(given), given.size(), fmt::format("clearance: {}\n", clearance));
       const std::string path = dir.file(name);
       test::write_text(path, text);
       return path;
     };
-    const Output below = run_program("verify --job " + job_with(closest - 0.05, "below.yaml") + " " + program + " --out " + dir.file("vb"), dir);
+    const Output below =
+        run_program("verify --job " + job_with(closest - 0.05, "below.yaml") + " " + program + " --out " + dir.file("vb"), dir);
     INFO(below.out, below.err);
     CHECK(below.code == 0);
     const double wide = closest + 0.5;
-    const Output above = run_program("verify --job " + job_with(wide, "above.yaml") + " " + program + " --out " + dir.file("va"), dir);
+    const Output above =
+        run_program("verify --job " + job_with(wide, "above.yaml") + " " + program + " --out " + dir.file("va"), dir);
     INFO(above.out, above.err);
     CHECK(above.code == 4);
     CHECK(above.out.find(fmt::format("inside the rapid clearance of {} mm", wide)) != std::string::npos);

@@ -248,7 +248,8 @@ TEST_CASE("a rapid off the part but inside the rapid clearance is a finding of i
       CHECK(h.kind() == "collision");
       CHECK(h.depth_mm == doctest::Approx(off).epsilon(0.01));
     }
-    CHECK(into.first_problem("into.apt").rfind(fmt::format("into.apt:1: tool collision {:.4f} mm deep at (", into.hits.front().depth_mm), 0) == 0);
+    const std::string expected = fmt::format("into.apt:1: tool collision {:.4f} mm deep at (", into.hits.front().depth_mm);
+    CHECK(into.first_problem("into.apt").rfind(expected, 0) == 0);
   }
 }
 
