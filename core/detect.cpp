@@ -851,10 +851,14 @@ bool omega_over_phi(const MachinedSurface& ms, int row, int column) {
 // motion where its line reaches Φ's boundary; a contact curve slanted to that boundary reaches it at
 // one end of the tool first and leaves a wedge of the boundary strip unmachined (rotor 37's trailing
 // edge: 2-10 of 241 columns along the hub half, fitted within 0.003 mm up to where the motion ends).
-// The motion is continued straight by steps of 5% of its length, at most 20% an end, and fitted
-// again with its tool held (what of the line still lies over Φ holds it there), each judged as a
-// candidate (trimmed where it gouges Φ or meets the part), and kept while it brings more of what is
-// uncovered. The kept stretch's t_from / t_to then lie beyond [0, 1] of the first optimised motion.
+// The motion is continued straight by steps of 5% of its length, at most 40% an end, and fitted
+// again with its tool held (what of the line still lies over Φ holds it there). Each step offers that
+// fit and the fit anchored (the stretch machined so far kept as it was, the fit only past the ends:
+// a refit that moves the rest leaves what it machined or gouges there); each is judged as a
+// candidate (trimmed where it gouges Φ or meets the part) and the one bringing most of what is
+// uncovered is kept while it brings more. Both ends step together; when that brings nothing, each
+// end alone (one end gouging trimmed the joint step back), and an end that brings nothing alone
+// stops. The kept stretch's t_from / t_to then lie beyond [0, 1] of the first optimised motion.
 Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>& covered, const std::vector<double>& area,
                  const CoverOptions& o) {
   PatchOptions po = candidate_options(o);
@@ -866,33 +870,74 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
   const auto over_phi = [](const MachinedSurface& ms, int row) { return omega_over_phi(ms, row, -1); };
   const PatchFit original = f.fit;
   const double t_from = original.t_from, w = original.t_to - original.t_from;
+  constexpr double step = 0.05;
   // Not an end trimmed already (where the motion gouged Φ or met the part).
   bool ends[2] = {original.t_from == 0 && over_phi(original.machined, 0),
                   original.t_to == 1 && over_phi(original.machined, original.machined.omega.n_t - 1)};
-  int before = 0, after = 0;  // steps of 5% the kept motion reaches past each end
-  for (int step = 0; step < 4 && (ends[0] || ends[1]); ++step) {
-    const int kb = before + (ends[0] ? 1 : 0), ka = after + (ends[1] ? 1 : 0);
-    const double b = 0.05 * kb, a = 0.05 * ka;
+  // The motion continued by kb / ka steps, its best candidate (none when none is machinable), its
+  // gain, and whether its kept stretch still reaches each continued end over Φ.
+  struct Step {
+    std::optional<PatchFit> fit;
+    double gain = 0;
+    bool open[2] = {false, false};
+  };
+  const auto try_step = [&](int kb, int ka) {
+    Step out;
+    const double b = step * kb, a = step * ka;
     PatchFit p = original;
     try {
       p.fit = optimize_motion(surface, continued(original.fit.rails, b, a), held);
-      p.fit.eps_ini = original.fit.eps_ini;
-      p.fit.iterations += original.fit.iterations;
-      p = machine_and_trim(surface, std::move(p), po);
     } catch (const InputError&) {
-      break;  // the continued motion left Φ
+      return out;  // the continued motion left Φ
     }
-    if (!machinable(p)) break;
-    const double g = gain_of(p, covered, area, po.tolerance);
-    if (!(g > f.gain + 1e-4)) break;
-    // The kept stretch in the first motion's t; an end trimmed back (a gouge or the part) or beyond
-    // Φ is not continued further.
-    ends[0] = ends[0] && p.t_from == 0 && over_phi(p.machined, 0);
-    ends[1] = ends[1] && p.t_to == 1 && over_phi(p.machined, p.machined.omega.n_t - 1);
-    std::tie(p.t_from, p.t_to) = kept_within(t_from - w * b, t_from + w * (1 + a), p.t_from, p.t_to);
-    f.fit = std::move(p);
-    f.gain = g;
+    p.fit.eps_ini = original.fit.eps_ini;
+    p.fit.iterations += original.fit.iterations;
+    PatchFit anchor = p;
+    anchor.fit.rails = anchored(original.fit.rails, p.fit.rails, b, a, step);
+    for (PatchFit* c : {&p, &anchor}) {
+      try {
+        PatchFit j = machine_and_trim(surface, std::move(*c), po);
+        if (!machinable(j)) continue;
+        const double g = gain_of(j, covered, area, po.tolerance);
+        if (out.fit && !(g > out.gain)) continue;
+        // The kept stretch in the first motion's t; an end trimmed back (a gouge or the part) or
+        // beyond Φ is not continued further.
+        out.open[0] = kb > 0 && j.t_from == 0 && over_phi(j.machined, 0);
+        out.open[1] = ka > 0 && j.t_to == 1 && over_phi(j.machined, j.machined.omega.n_t - 1);
+        std::tie(j.t_from, j.t_to) = kept_within(t_from - w * b, t_from + w * (1 + a), j.t_from, j.t_to);
+        out.fit = std::move(j), out.gain = g;
+      } catch (const InputError&) {
+      }
+    }
+    return out;
+  };
+  int before = 0, after = 0;  // steps the kept motion reaches past each end
+  const auto take = [&](Step& s, int kb, int ka) {
+    f.fit = std::move(*s.fit);
+    f.gain = s.gain;
+    ends[0] = ends[0] && s.open[0], ends[1] = ends[1] && s.open[1];
     before = kb, after = ka;
+  };
+  const auto gains = [&](const Step& s) { return s.fit && s.gain > f.gain + 1e-4; };
+  while ((ends[0] || ends[1]) && std::max(before, after) < 8) {
+    if (ends[0] && ends[1]) {
+      if (Step s = try_step(before + 1, after + 1); gains(s)) {
+        take(s, before + 1, after + 1);
+        continue;
+      }
+    }
+    Step alone[2];
+    for (int e = 0; e < 2; ++e)
+      if (ends[e]) {
+        alone[e] = try_step(before + (e == 0), after + (e == 1));
+        if (!gains(alone[e])) ends[e] = false;
+      }
+    const int e = gains(alone[0]) && (!gains(alone[1]) || alone[0].gain >= alone[1].gain) ? 0 : 1;
+    if (!gains(alone[e])) break;
+    // The other end stays open for the next step when it brought something alone.
+    const bool other = ends[1 - e];
+    take(alone[e], before + (e == 0), after + (e == 1));
+    ends[1 - e] = other;
   }
   return f;
 }

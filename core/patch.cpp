@@ -528,8 +528,8 @@ std::pair<size_t, size_t> longest_set_run(const std::vector<char>& ok) {
 }
 
 namespace {
-// The rails over [t0, t1] of `point(rail, t)`, reparametrised to [0, 1] by least squares on dense
-// samples (same control point count).
+// The rails over [t0, t1] of `point(rail, t)` (rail 0: a, 1: b), reparametrised to [0, 1] by least
+// squares on dense samples (same control point count).
 template <class Point>
 Rails resampled(const Rails& r, double t0, double t1, Point point) {
   const int samples = std::max(8 * r.a.size(), 200);
@@ -537,25 +537,39 @@ Rails resampled(const Rails& r, double t0, double t1, Point point) {
   const std::vector<double> ts = uniform_parameters(samples);
   for (int i = 0; i < samples; ++i) {
     const double t = t0 + (t1 - t0) * ts[size_t(i)];
-    A.row(i) = point(r.a, t).transpose();
-    B.row(i) = point(r.b, t).transpose();
+    A.row(i) = point(0, t).transpose();
+    B.row(i) = point(1, t).transpose();
   }
   return {fit_bspline(A, ts, r.a.size()), fit_bspline(B, ts, r.b.size()), r.length};
 }
+const BSpline& rail(const Rails& r, int k) { return k == 0 ? r.a : r.b; }
 }  // namespace
 
 Rails trimmed(const Rails& r, double t0, double t1) {
-  return resampled(r, t0, t1, [](const BSpline& c, double t) { return c.point(t); });
+  return resampled(r, t0, t1, [&](int k, double t) { return rail(r, k).point(t); });
 }
 
 Rails continued(const Rails& r, double before, double after) {
   // Each rail beyond an end along its chord over the last `step` of t (a least-squares spline's end
   // derivatives swing; its end span's cubic continued leaves the motion within a tenth of its length).
   constexpr double step = 0.05;
-  return resampled(r, -before, 1 + after, [&](const BSpline& c, double t) -> Eigen::Vector3d {
+  return resampled(r, -before, 1 + after, [&](int k, double t) -> Eigen::Vector3d {
+    const BSpline& c = rail(r, k);
     if (t < 0) return c.point(0) + t * (c.point(step) - c.point(0)) / step;
     if (t > 1) return c.point(1) + (t - 1) * (c.point(1) - c.point(1 - step)) / step;
     return c.point(t);
+  });
+}
+
+Rails anchored(const Rails& original, const Rails& further, double before, double after, double blend) {
+  const double span = 1 + before + after;
+  return resampled(original, -before, 1 + after, [&](int k, double t) -> Eigen::Vector3d {
+    const Eigen::Vector3d f = rail(further, k).point((t + before) / span);
+    if (t <= 0 || t >= 1) return f;
+    double l = 0;  // the share of `further` inside a continued end
+    if (before > 0 && t < blend) l = 1 - t / blend;
+    if (after > 0 && t > 1 - blend) l = std::max(l, 1 - (1 - t) / blend);
+    return (1 - l) * rail(original, k).point(t) + l * f;
   });
 }
 

@@ -144,6 +144,12 @@ struct ToolCut {
 // continued straight past its ends, as the start of a motion fitted further (detection).
 [[nodiscard]] Rails continued(const Rails& rails, double before, double after);
 
+// `original` over [-before, 1 + after], reparametrised to [0, 1] (same control point count), with
+// `further` (a motion over that same span in its own [0, 1], as a fit from `continued` moved it) past
+// each continued end: the stretch [0, 1] stays as it was, blended into `further` over `blend` of t
+// inside each end continued (before / after > 0). A motion continued without moving what it machined.
+[[nodiscard]] Rails anchored(const Rails& original, const Rails& further, double before, double after, double blend);
+
 // The longest run of set entries of `ok` (the first one on a tie) as (first index, count); count 0
 // when none is set.
 [[nodiscard]] std::pair<size_t, size_t> longest_set_run(const std::vector<char>& ok);

@@ -671,10 +671,49 @@ TEST_CASE("detection's last pass makes a cutter stopping inside the flank longer
   CHECK(again[0].reach_lengthened == 0.0);
 }
 
+TEST_CASE("a motion continued and anchored keeps its stretch as it was and takes the refit only past its ends") {
+  // A bent motion (16 control points a rail, 40 mm long) and `further`: that motion continued by 20%
+  // past both ends, then moved 0.5 mm sideways as a refit with the tool held may move it all.
+  const auto rail = [](double dz) {
+    Eigen::MatrixXd P(200, 3);
+    std::vector<double> ts(200);
+    for (int i = 0; i < 200; ++i) {
+      const double t = i / 199.0;
+      ts[size_t(i)] = t;
+      P.row(i) << 5 * std::sin(2 * t), 40 * t, dz;
+    }
+    return fit_bspline(P, ts, 16);
+  };
+  const Rails original{rail(0), rail(20), 20};
+  Rails further = continued(original, 0.2, 0.2);
+  for (BSpline* c : {&further.a, &further.b})
+    for (int i = 0; i < c->ctrl.rows(); ++i) c->ctrl(i, 0) += 0.5;
+  const Rails r = anchored(original, further, 0.2, 0.2, 0.05);
+  CHECK(r.a.ctrl.rows() == 16);
+  CHECK(r.length == original.length);
+  const auto at = [](const Rails& x, double u) { return x.a.point(u); };
+  // The worst distance to the original over [0.3, 0.7] and to `further` beyond the ends. The spline
+  // (16 control points over 1.4 of the first t) rings where the blend bends: 0.05 mm of the 0.5 at
+  // t 0.15, 0.026 mm at 0.2, 0.014 mm over [0.3, 0.7] (under 3% of how far the refit moved, and a
+  // refit with the tool held moves a motion by microns).
+  double kept = 0, past = 0;
+  for (int k = 0; k <= 140; ++k) {
+    const double t = -0.2 + 0.01 * k, u = (t + 0.2) / 1.4;
+    if (t >= 0.3 && t <= 0.7) kept = std::max(kept, (at(r, u) - at(original, t)).norm());
+    if (t <= -0.05 || t >= 1.05) past = std::max(past, (at(r, u) - at(further, u)).norm());
+  }
+  MESSAGE("within the stretch ", kept, " mm from the motion as it was; past its ends ", past, " mm from the refit (moved 0.5 mm)");
+  CHECK(kept <= 0.02);
+  CHECK(past <= 0.06);
+  // Continued at one end only, the other end is the motion's own.
+  const Rails one = anchored(original, continued(original, 0, 0.2), 0, 0.2, 0.05);
+  CHECK((one.a.point(0) - original.a.point(0)).norm() <= 1e-3);
+}
+
 TEST_CASE("detection's last pass continues a patch's motion past its ends where the union grows, judged against the part") {
   // A cover of one patch whose motion runs over y 5..50 mm of the 60 mm flank (upright lines, the
   // tip over a floor 3 mm under it). The last pass continues the motion past both ends by steps of 5%
-  // of it (at most 20% an end; an end beyond Φ is not continued further), fits it again with its tool
+  // of it (at most 40% an end; an end beyond Φ is not continued further), fits it again with its tool
   // held and judges it against the part: it machines the flank's width. A patch beside it that
   // machines those ends already leaves nothing to gain: nothing is replaced.
   Setup s;
@@ -704,7 +743,7 @@ TEST_CASE("detection's last pass continues a patch's motion past its ends where 
   CHECK(c.t_from < 0);
   CHECK(c.t_to > 1);
   CHECK(reach_y(c).first <= 0.5);   // the flank's start (y 0)
-  CHECK(reach_y(c).second >= 57.5);  // 20% of the 45 mm motion past y 50: y 59
+  CHECK(reach_y(c).second >= 59.5);  // the flank's end, y 60 (at most 20% past y 50 reached y 58)
   CHECK(c.coverage > mid.coverage + 0.1);
   CHECK(machinable(c));
   double overcut = 0;
