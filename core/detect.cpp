@@ -896,6 +896,8 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
     anchor.fit.rails = anchored(original.fit.rails, p.fit.rails, b, a, step);
     for (PatchFit* c : {&p, &anchor}) {
       try {
+        // ε of the anchored motion itself (eq. 13), not of the refit it was made from.
+        if (c == &anchor) c->fit.eps_opt = sample_error(surface, c->fit.rails, c->fit.tool, held);
         PatchFit j = machine_and_trim(surface, std::move(*c), po);
         if (!machinable(j)) continue;
         const double g = gain_of(j, covered, area, po.tolerance);

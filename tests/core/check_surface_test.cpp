@@ -751,6 +751,8 @@ TEST_CASE("detection's last pass continues a patch's motion past its ends where 
     if (std::isfinite(d)) overcut = std::max(overcut, -d);
   CHECK(overcut <= po.tolerance);
   CHECK(c.fit.tool.D == mid.fit.tool.D);  // the tool held
+  // The ε reported is the kept motion's own (eq. 13 on its rails), whichever candidate it came from.
+  CHECK(c.fit.eps_opt.max == doctest::Approx(sample_error(s.phi, c.fit.rails, c.fit.tool, po.fit).max).epsilon(1e-6));
   CHECK(s.lowest_tip_z(c.fit.rails) >= -3 + 0.005 - 1e-6);  // clear of the floor
   // Not continued (CoverOptions::continue_ends off; nothing else to offer here): as it was.
   co.continue_ends = false;
