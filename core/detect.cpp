@@ -871,11 +871,15 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
   const PatchFit original = f.fit;
   const double t_from = original.t_from, w = original.t_to - original.t_from;
   constexpr double step = 0.05;
-  // Not an end trimmed already (where the motion gouged Φ or met the part).
-  bool ends[2] = {original.t_from == 0 && over_phi(original.machined, 0),
-                  original.t_to == 1 && over_phi(original.machined, original.machined.omega.n_t - 1)};
+  constexpr int most_steps = 8;  // 40% of the motion an end
+  // Whether a fit's end (0: t = 0, 1: t = 1) may be continued: not trimmed (where the motion gouged Φ
+  // or met the part) and its last row of Ω still over Φ.
+  const auto open_at = [&](const PatchFit& p, int end) {
+    return end == 0 ? p.t_from == 0 && over_phi(p.machined, 0) : p.t_to == 1 && over_phi(p.machined, p.machined.omega.n_t - 1);
+  };
+  bool ends[2] = {open_at(original, 0), open_at(original, 1)};
   // The motion continued by kb / ka steps, its best candidate (none when none is machinable), its
-  // gain, and whether its kept stretch still reaches each continued end over Φ.
+  // gain, and open_at of that candidate's ends.
   struct Step {
     std::optional<PatchFit> fit;
     double gain = 0;
@@ -902,10 +906,8 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
         if (!machinable(j)) continue;
         const double g = gain_of(j, covered, area, po.tolerance);
         if (out.fit && !(g > out.gain)) continue;
-        // The kept stretch in the first motion's t; an end trimmed back (a gouge or the part) or
-        // beyond Φ is not continued further.
-        out.open[0] = kb > 0 && j.t_from == 0 && over_phi(j.machined, 0);
-        out.open[1] = ka > 0 && j.t_to == 1 && over_phi(j.machined, j.machined.omega.n_t - 1);
+        out.open[0] = open_at(j, 0), out.open[1] = open_at(j, 1);
+        // The kept stretch in the first motion's t.
         std::tie(j.t_from, j.t_to) = kept_within(t_from - w * b, t_from + w * (1 + a), j.t_from, j.t_to);
         out.fit = std::move(j), out.gain = g;
       } catch (const InputError&) {
@@ -914,14 +916,18 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
     return out;
   };
   int before = 0, after = 0;  // steps the kept motion reaches past each end
+  // The step taken: an end stepped stays open while the kept stretch still reaches it over Φ (an end
+  // trimmed back, by a gouge or the part, or beyond Φ is not continued further); an end not stepped
+  // keeps what it had.
   const auto take = [&](Step& s, int kb, int ka) {
     f.fit = std::move(*s.fit);
     f.gain = s.gain;
-    ends[0] = ends[0] && s.open[0], ends[1] = ends[1] && s.open[1];
+    if (kb > before) ends[0] = ends[0] && s.open[0];
+    if (ka > after) ends[1] = ends[1] && s.open[1];
     before = kb, after = ka;
   };
   const auto gains = [&](const Step& s) { return s.fit && s.gain > f.gain + 1e-4; };
-  while ((ends[0] || ends[1]) && std::max(before, after) < 8) {
+  while ((ends[0] || ends[1]) && std::max(before, after) < most_steps) {
     if (ends[0] && ends[1]) {
       if (Step s = try_step(before + 1, after + 1); gains(s)) {
         take(s, before + 1, after + 1);
@@ -929,17 +935,17 @@ Fitted continued(const SurfaceIndex& surface, Fitted f, const std::vector<char>&
       }
     }
     Step alone[2];
+    int best = -1;  // the end that brings most alone (the a end on a tie)
     for (int e = 0; e < 2; ++e)
       if (ends[e]) {
         alone[e] = try_step(before + (e == 0), after + (e == 1));
-        if (!gains(alone[e])) ends[e] = false;
+        if (!gains(alone[e]))
+          ends[e] = false;
+        else if (best < 0 || alone[e].gain > alone[best].gain)
+          best = e;
       }
-    const int e = gains(alone[0]) && (!gains(alone[1]) || alone[0].gain >= alone[1].gain) ? 0 : 1;
-    if (!gains(alone[e])) break;
-    // The other end stays open for the next step when it brought something alone.
-    const bool other = ends[1 - e];
-    take(alone[e], before + (e == 0), after + (e == 1));
-    ends[1 - e] = other;
+    if (best < 0) break;
+    take(alone[best], before + (best == 0), after + (best == 1));
   }
   return f;
 }

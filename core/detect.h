@@ -168,7 +168,7 @@ struct Detection {
 //    where that end's column of Ω still lies over Φ (lengthened_to_reach: by 10%, 25%, 50% of its
 //    length and to the tool's max_length), judged as a candidate;
 //  - then the winner with its motion continued past its ends (CoverOptions::continue_ends: by steps
-//    of 5% of it, at most 20% an end, its tool held, while it brings more of what the others leave),
+//    of 5% of it, at most 40% an end, its tool held, while it brings more of what the others leave),
 //    judged against the part as the floor pass judges.
 // The variant under which the union's coverage of Φ grows most replaces the patch in `cover`. A
 // patch is judged again once another has been replaced since (CoverOptions::finish_sweeps); its floor

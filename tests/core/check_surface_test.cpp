@@ -743,7 +743,7 @@ TEST_CASE("detection's last pass continues a patch's motion past its ends where 
   CHECK(c.t_from < 0);
   CHECK(c.t_to > 1);
   CHECK(reach_y(c).first <= 0.5);   // the flank's start (y 0)
-  CHECK(reach_y(c).second >= 59.5);  // the flank's end, y 60 (at most 20% past y 50 reached y 58)
+  CHECK(reach_y(c).second >= 59.5);  // the flank's end, y 60 (with the old cap of 20% an end: y 58)
   CHECK(c.coverage > mid.coverage + 0.1);
   CHECK(machinable(c));
   double overcut = 0;
